@@ -1,0 +1,121 @@
+"""How the uncertain delay moves the input matrices: the curve ``tau -> B0(tau)`` and a polytope around it.
+
+Both plant forms have ``B0(tau) + B1(tau) = B0 + B1`` for every ``tau``, so the delay is one matrix
+``B0(tau)`` and the closed loop is affine in it. That is what makes a polytopic certificate sound:
+if ``B0(tau)`` lies in the convex hull of a few vertices for every ``tau`` in the interval, one common
+Lyapunov matrix that works at every vertex works for any sequence ``tau(k)``.
+
+* continuous form: ``B0(tau)`` is exact (``monitor.discretize``).
+* discrete form: ``B0(tau) = B0 + F(tau) E`` with the paper's own ``F(tau)`` computed from the
+  reconstructed ``A_c = logm(A)/h`` and ``E`` from the file (or the reconstructed ``B_c``).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from monitor.discretize import F_of_tau, b0_b1, integral_expm, reconstruct_continuous
+from monitor.plant import ContinuousModel, Plant
+
+__all__ = ["b0_of_tau", "tau_grid", "b0_polytope", "curve_model", "input_sum"]
+
+
+def input_sum(plant: Plant) -> np.ndarray:
+    """``B0(tau) + B1(tau)``: the same for every delay."""
+    return plant.B0 + plant.B1
+
+
+@lru_cache(maxsize=32)
+def _reconstruction(plant: Plant) -> ContinuousModel:
+    return reconstruct_continuous(plant.A, input_sum(plant), plant.Df, plant.Dd, plant.h)
+
+
+def curve_model(plant: Plant) -> ContinuousModel:
+    """The continuous model whose exponentials define ``F(tau)``: the plant's own, or the reconstruction."""
+    return plant.continuous if plant.continuous is not None else _reconstruction(plant)
+
+
+def _E(plant: Plant) -> np.ndarray:
+    return plant.E if plant.E is not None else curve_model(plant).B_c
+
+
+def b0_of_tau(plant: Plant, tau: float) -> np.ndarray:
+    """``B0(tau)`` for a delay in ``[0, h)``; ``B1(tau)`` is ``input_sum(plant) - B0(tau)``."""
+    if plant.continuous is not None:
+        return b0_b1(plant.continuous, plant.h, tau)[0]
+    return plant.B0 + F_of_tau(curve_model(plant), plant.h, tau, plant.tau_bar) @ _E(plant)
+
+
+def tau_grid(plant: Plant, points: int = 201) -> np.ndarray:
+    """A dense grid over ``[tau_min, tau_max]`` (both ends included)."""
+    if plant.tau_max == plant.tau_min:
+        return np.array([plant.tau_min])
+    return np.linspace(plant.tau_min, plant.tau_max, points)
+
+
+def _second_derivative_bound(plant: Plant) -> float:
+    """An upper bound of ``|d^2 B0 / d tau^2|`` over the interval (Frobenius norm).
+
+    ``dB0/dtau = -e^{A_c (h - tau)} B`` and ``d^2B0/dtau^2 = A_c e^{A_c (h - tau)} B`` with ``B = B_c`` (continuous)
+    or ``E`` (discrete); bounded on a fine grid with a 10 % margin for the gaps between grid points.
+    """
+    model = curve_model(plant)
+    B = model.B_c if plant.continuous is not None else _E(plant)
+    values = [
+        np.linalg.norm(model.A_c @ integral_expm(model.A_c, plant.h - t)[0] @ B)
+        for t in np.linspace(plant.tau_min, plant.tau_max, 101)
+    ]
+    return 1.1 * max(values)
+
+
+def b0_polytope(plant: Plant, segments: int = 8) -> list[np.ndarray]:
+    """Vertices of a polytope that provably contains ``B0(tau)`` for every ``tau`` in the interval.
+
+    The curve is split into ``segments`` chords; between two grid points it stays within
+    ``r = dtau^2 / 8 * max|B0''|`` of its chord (the interpolation error bound), so the hull of the grid
+    points, each blown up into a cross-polytope that contains a ball of radius ``r``, contains it.
+    Redundant points are pruned with a convex hull where the dimension allows.
+    """
+    taus = np.linspace(plant.tau_min, plant.tau_max, segments + 1)
+    points = [b0_of_tau(plant, float(t)).ravel() for t in taus]
+    dim = points[0].size
+    if plant.tau_max == plant.tau_min:
+        return [points[0].reshape(plant.B0.shape)]
+    dtau = (plant.tau_max - plant.tau_min) / segments
+    radius = dtau**2 / 8.0 * _second_derivative_bound(plant) * np.sqrt(dim) * 1.001
+    cloud = np.array([pt + s * radius * e for pt in points for e in np.eye(dim) for s in (1.0, -1.0)])
+    hull = _prune(cloud)
+    box = _oriented_box(cloud)
+    chosen = box if len(box) < len(hull) else hull
+    return [v.reshape(plant.B0.shape) for v in chosen]
+
+
+def _oriented_box(cloud: np.ndarray) -> np.ndarray:
+    """The corners of a box aligned with the cloud's principal axes that contains every point.
+
+    Why: the curve is short and nearly straight, so a thin box (2^dim corners) holds it with far fewer
+    vertices than its hull, and each vertex costs two LMIs in the design.
+    """
+    centre = cloud.mean(axis=0)
+    _, _, axes = np.linalg.svd(cloud - centre, full_matrices=True)
+    coords = (cloud - centre) @ axes.T
+    lo, hi = coords.min(axis=0), coords.max(axis=0)
+    dim = cloud.shape[1]
+    if dim > 10:
+        return cloud
+    corners = np.array(np.meshgrid(*[(a, b) for a, b in zip(lo, hi)], indexing="ij")).reshape(dim, -1).T
+    return centre + corners @ axes
+
+
+def _prune(cloud: np.ndarray) -> np.ndarray:
+    """Keep the convex-hull vertices (Qhull) when the dimension is small; the hull is unchanged."""
+    if cloud.shape[1] > 6 or cloud.shape[1] < 2:
+        return cloud
+    try:
+        from scipy.spatial import ConvexHull
+
+        return cloud[ConvexHull(cloud).vertices]
+    except Exception:  # degenerate (flat) clouds: keep every point, still a valid cover
+        return cloud

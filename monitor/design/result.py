@@ -1,0 +1,26 @@
+"""What a design returns: the gains, the bounds it claims, and how the solve went."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from monitor.closed_loop import Gains
+
+
+@dataclass
+class DesignResult:
+    """Gains plus the claims ``verify`` will check independently (``gamma_e``, ``gamma_z``, certificate)."""
+
+    method: str
+    gains: Gains
+    gamma_e: float
+    gamma_z: float
+    solver_status: str
+    build_seconds: float
+    solve_seconds: float
+    total_seconds: float
+    certificate: dict[str, np.ndarray] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    bounds_apply_to: str = "real closed loop, every tau in the interval, time-varying"

@@ -1,0 +1,149 @@
+"""Gains files: what ``design`` writes and ``verify``, ``run`` and ``demo`` read (TOML, see CONTRACT.md).
+
+A gains file records the method, the five gain matrices, the bounds the design claims, the solver's
+status and times, the certificate (Lyapunov matrices and polytope vertices) and the hash of the plant
+it was designed for, so that ``verify`` can re-check the certificate and ``run`` can refuse a mismatch.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomli_w
+
+from monitor.closed_loop import Gains
+from monitor.design.result import DesignResult
+from monitor.errors import UserError
+from monitor.plant import Plant
+
+__all__ = ["GainsFile", "write_gains", "read_gains", "parse_gain_matrix"]
+
+GAIN_NAMES = ("L", "M", "K1", "K2", "K3")
+_GAINS_KEYS = set(GAIN_NAMES) | {"method", "gamma_e", "gamma_z", "plant_hash", "plant", "bounds_apply_to"}
+_TOP_KEYS = {"gains", "solver", "certificate", "notes"}
+
+
+class GainsFile:
+    """A parsed gains file: the gains plus whatever else it recorded."""
+
+    def __init__(self, gains: Gains, meta: dict[str, Any], certificate: dict[str, np.ndarray], source: str) -> None:
+        self.gains = gains
+        self.meta = meta
+        self.certificate = certificate
+        self.source = source
+
+    @property
+    def method(self) -> str:
+        return str(self.meta.get("method", "unknown"))
+
+    def check_plant(self, plant: Plant) -> None:
+        """Refuse gains whose shapes do not fit; a hash mismatch is the caller's to report."""
+        try:
+            self.gains.check_shapes(plant)
+        except ValueError as exc:
+            raise UserError(f"{self.source}: {exc}") from None
+
+
+def _rows(a: np.ndarray) -> list[list[float]]:
+    return [[float(x) for x in row] for row in np.atleast_2d(a)]
+
+
+def write_gains(path: str | Path, result: DesignResult, plant: Plant) -> None:
+    """Write atomically (temp file + rename) so a failed run never leaves a half-written gains file."""
+    g = result.gains
+    doc: dict[str, Any] = {
+        "gains": {
+            "method": result.method,
+            **{name: _rows(getattr(g, name)) for name in GAIN_NAMES},
+            "gamma_e": float(result.gamma_e),
+            "gamma_z": float(result.gamma_z),
+            "bounds_apply_to": result.bounds_apply_to,
+            "plant": plant.source,
+            "plant_hash": plant.digest,
+        },
+        "solver": {
+            "name": "CLARABEL",
+            "status": result.solver_status,
+            "build_seconds": round(result.build_seconds, 4),
+            "solve_seconds": round(result.solve_seconds, 4),
+            "total_seconds": round(result.total_seconds, 4),
+        },
+        "notes": {"lines": list(result.notes)},
+    }
+    if result.certificate:
+        doc["certificate"] = {k: _rows(v) for k, v in result.certificate.items()}
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=path.name, dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            tomli_w.dump(doc, fh)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def read_gains(path: str | Path) -> GainsFile:
+    """Parse and validate a gains file; every problem is a one-line UserError naming the key and file."""
+    source = str(path)
+    try:
+        raw = tomllib.loads(Path(path).read_text("utf-8"))
+    except FileNotFoundError:
+        raise UserError(f"{source}: gains file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"{source}: cannot read gains file: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{source}: not valid TOML: {exc}") from None
+    unknown = sorted(set(raw) - _TOP_KEYS)
+    if unknown:
+        raise UserError(f"{source}: unknown table '{unknown[0]}' (allowed: {', '.join(sorted(_TOP_KEYS))})")
+    table = raw.get("gains")
+    if not isinstance(table, dict):
+        raise UserError(f"{source}: missing [gains] table")
+    unknown = sorted(set(table) - _GAINS_KEYS)
+    if unknown:
+        raise UserError(f"{source}: unknown key 'gains.{unknown[0]}'")
+    mats = {}
+    for name in GAIN_NAMES:
+        if name not in table:
+            raise UserError(f"{source}: key 'gains.{name}' is missing")
+        mats[name] = _matrix(table[name], f"{source}: key 'gains.{name}'")
+    meta = {k: v for k, v in table.items() if k not in GAIN_NAMES}
+    meta["solver"] = raw.get("solver", {})
+    cert = {}
+    for k, v in (raw.get("certificate") or {}).items():
+        cert[k] = _matrix(v, f"{source}: key 'certificate.{k}'")
+    return GainsFile(Gains(**mats), meta, cert, source)
+
+
+def _matrix(value: Any, where: str) -> np.ndarray:
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        value = [[value]]
+    if not isinstance(value, list) or not value or not all(isinstance(r, list) and r for r in value):
+        raise UserError(f"{where} must be a matrix written as a list of rows, e.g. [[1.87], [1.63]]")
+    if len({len(r) for r in value}) != 1:
+        raise UserError(f"{where} has rows of different lengths")
+    if any(isinstance(x, bool) or not isinstance(x, (int, float)) for r in value for x in r):
+        raise UserError(f"{where} must contain only numbers")
+    arr = np.array(value, dtype=float)
+    if not np.all(np.isfinite(arr)):
+        raise UserError(f"{where} contains a non-finite number")
+    return arr
+
+
+def parse_gain_matrix(text: str, name: str) -> np.ndarray:
+    """A gain given on the command line: ``1.87,1.63`` is a column; ``a,b;c,d`` separates rows."""
+    try:
+        if ";" in text:
+            rows = [[float(x) for x in row.split(",")] for row in text.split(";")]
+        else:
+            rows = [[float(x)] for x in text.split(",")]
+    except ValueError:
+        raise UserError(f"--{name} '{text}': expected numbers like 1.87,1.63 (column) or 1,2;3,4 (rows)") from None
+    return _matrix(rows, f"--{name}")

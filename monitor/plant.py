@@ -1,0 +1,256 @@
+"""Plant descriptions: loading, validating and naming the sampled plant with uncertain short delay.
+
+A plant file is TOML in one of two forms (see the README):
+
+* ``form = "continuous"``: ``A_c, B_c, D_cf, D_cd, C`` plus ``h, tau_min, tau_max``. The delay-aware
+  discrete model follows exactly from it (``monitor.discretize``); the simulator integrates it.
+* ``form = "discrete"``: ``A, B0, B1, C, Df, Dd`` plus ``h, tau_min, tau_max`` and optionally ``delta``
+  and ``E``. The delay then enters only as the paper's norm-bounded uncertainty
+  ``B0(tau) = B0 + F E``, ``B1(tau) = B1 - F E``, ``sigma_max(F) <= delta``.
+
+Why be strict: a silently ignored typo in a key (``tau_mx``) would design for the wrong plant, so every
+unknown key, wrong shape, non-finite number or delay outside ``[0, h)`` is a one-line ``UserError``
+naming the key and the file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from monitor.errors import UserError
+
+__all__ = ["Plant", "ContinuousModel", "Actuator", "load_plant", "parse_plant", "preset_names"]
+
+PRESETS = {"paper": "paper.toml", "paper-continuous": "paper-continuous.toml"}
+
+_COMMON_KEYS = {"form", "name", "description", "unit", "h", "tau_min", "tau_max", "C", "actuator"}
+_CONTINUOUS_KEYS = _COMMON_KEYS | {"A_c", "B_c", "D_cf", "D_cd"}
+_DISCRETE_KEYS = _COMMON_KEYS | {"A", "B0", "B1", "Df", "Dd", "delta", "E"}
+_ACTUATOR_KEYS = {"limit", "rate_limit"}
+
+
+@dataclass(frozen=True)
+class Actuator:
+    """Physical limits of the elevator, used by the simulator (None: unlimited)."""
+
+    limit: float | None = None
+    rate_limit: float | None = None
+
+
+@dataclass(frozen=True)
+class ContinuousModel:
+    """``x' = A_c x + B_c u + D_cf f + D_cd d``, ``y = C x``."""
+
+    A_c: np.ndarray
+    B_c: np.ndarray
+    D_cf: np.ndarray
+    D_cd: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Plant:
+    """A validated plant. ``A, B0, B1, Df, Dd`` are the discrete matrices at the nominal delay.
+
+    For the continuous form ``B0``/``B1`` are the exact split at ``tau_bar`` (mid-interval); for the
+    discrete form they are the printed matrices. ``continuous`` is None for the discrete form.
+    """
+
+    name: str
+    form: str
+    h: float
+    tau_min: float
+    tau_max: float
+    A: np.ndarray
+    B0: np.ndarray
+    B1: np.ndarray
+    C: np.ndarray
+    Df: np.ndarray
+    Dd: np.ndarray
+    continuous: ContinuousModel | None = None
+    delta: float | None = None
+    E: np.ndarray | None = None
+    unit: str = "deg"
+    description: str = ""
+    actuator: Actuator = field(default_factory=Actuator)
+    source: str = "<memory>"
+    digest: str = ""
+
+    @property
+    def tau_bar(self) -> float:
+        """Nominal delay: the middle of the interval, as the paper takes it."""
+        return 0.5 * (self.tau_min + self.tau_max)
+
+    @property
+    def n(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def m(self) -> int:
+        return self.B0.shape[1]
+
+    @property
+    def l(self) -> int:  # noqa: E743 - the paper's name for the output dimension
+        return self.C.shape[0]
+
+    @property
+    def q(self) -> int:
+        return self.Df.shape[1]
+
+    @property
+    def p(self) -> int:
+        return self.Dd.shape[1]
+
+
+def preset_names() -> list[str]:
+    return sorted(PRESETS)
+
+
+def load_plant(spec: str | Path) -> Plant:
+    """Load a preset by name (``paper``, ``paper-continuous``) or a plant TOML file by path."""
+    spec_str = str(spec)
+    if spec_str in PRESETS:
+        text = resources.files("monitor.presets").joinpath(PRESETS[spec_str]).read_text("utf-8")
+        return parse_plant(text, source=f"preset:{spec_str}")
+    path = Path(spec_str)
+    if not path.is_file():
+        raise UserError(
+            f"plant '{spec_str}' is neither a preset ({', '.join(preset_names())}) nor a readable file"
+        )
+    try:
+        text = path.read_text("utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"{path}: cannot read plant file: {exc}") from None
+    return parse_plant(text, source=str(path))
+
+
+def parse_plant(text: str, source: str = "<memory>") -> Plant:
+    """Parse and validate plant TOML text; ``source`` names the file in every error."""
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{source}: not valid TOML: {exc}") from None
+    form = raw.get("form")
+    if form not in ("continuous", "discrete"):
+        raise UserError(f"{source}: key 'form' must be \"continuous\" or \"discrete\", got {form!r}")
+    allowed = _CONTINUOUS_KEYS if form == "continuous" else _DISCRETE_KEYS
+    unknown = sorted(set(raw) - allowed)
+    if unknown:
+        raise UserError(
+            f"{source}: unknown key '{unknown[0]}' for form '{form}' (allowed: {', '.join(sorted(allowed))})"
+        )
+    reader = _Reader(raw, source)
+    h = reader.scalar("h", positive=True)
+    tau_min = reader.scalar("tau_min")
+    tau_max = reader.scalar("tau_max")
+    if not 0.0 <= tau_min <= tau_max < h:
+        raise UserError(
+            f"{source}: keys 'tau_min'/'tau_max' must satisfy 0 <= tau_min <= tau_max < h "
+            f"(got {tau_min}, {tau_max}, h = {h})"
+        )
+    C = reader.matrix("C")
+    n = C.shape[1]
+    common: dict[str, Any] = dict(
+        name=str(raw.get("name", Path(source).stem)),
+        form=form,
+        h=h,
+        tau_min=tau_min,
+        tau_max=tau_max,
+        C=C,
+        unit=str(raw.get("unit", "deg")),
+        description=str(raw.get("description", "")),
+        actuator=reader.actuator(),
+        source=source,
+        digest=_digest(raw),
+    )
+    if form == "continuous":
+        A_c = reader.matrix("A_c", rows=n, cols=n)
+        B_c = reader.matrix("B_c", rows=n)
+        D_cf = reader.matrix("D_cf", rows=n)
+        D_cd = reader.matrix("D_cd", rows=n)
+        from monitor.discretize import discretize  # local: discretize imports Plant
+
+        model = ContinuousModel(A_c=A_c, B_c=B_c, D_cf=D_cf, D_cd=D_cd)
+        d = discretize(model, h, 0.5 * (tau_min + tau_max))
+        return Plant(A=d.A, B0=d.B0, B1=d.B1, Df=d.Df, Dd=d.Dd, continuous=model, **common)
+    A = reader.matrix("A", rows=n, cols=n)
+    B0 = reader.matrix("B0", rows=n)
+    B1 = reader.matrix("B1", rows=n, cols=B0.shape[1])
+    Df = reader.matrix("Df", rows=n)
+    Dd = reader.matrix("Dd", rows=n)
+    delta = reader.scalar("delta", positive=True) if "delta" in raw else None
+    E = reader.matrix("E") if "E" in raw else None
+    if E is not None and E.shape[1] != B0.shape[1]:
+        raise UserError(f"{source}: key 'E' must have {B0.shape[1]} column(s) (one per input), got {E.shape[1]}")
+    if E is not None and E.shape[0] != n:
+        raise UserError(f"{source}: key 'E' must have {n} row(s) (F is n x n, D = I), got {E.shape[0]}")
+    return Plant(A=A, B0=B0, B1=B1, Df=Df, Dd=Dd, delta=delta, E=E, **common)
+
+
+class _Reader:
+    """Typed access to the raw TOML table with errors that name the key and the file."""
+
+    def __init__(self, raw: dict[str, Any], source: str) -> None:
+        self.raw = raw
+        self.source = source
+
+    def _fail(self, key: str, what: str) -> UserError:
+        return UserError(f"{self.source}: key '{key}' {what}")
+
+    def scalar(self, key: str, positive: bool = False) -> float:
+        if key not in self.raw:
+            raise self._fail(key, "is missing")
+        value = self.raw[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self._fail(key, f"must be a number, got {value!r}")
+        value = float(value)
+        if not np.isfinite(value):
+            raise self._fail(key, f"must be finite, got {value}")
+        if positive and value <= 0:
+            raise self._fail(key, f"must be positive, got {value}")
+        return value
+
+    def matrix(self, key: str, rows: int | None = None, cols: int | None = None) -> np.ndarray:
+        if key not in self.raw:
+            raise self._fail(key, "is missing")
+        value = self.raw[key]
+        if not isinstance(value, list) or not value or not all(isinstance(r, list) and r for r in value):
+            raise self._fail(key, "must be a non-empty list of rows, e.g. [[1.0], [2.0]]")
+        widths = {len(r) for r in value}
+        if len(widths) != 1:
+            raise self._fail(key, f"has rows of different lengths {sorted(widths)}")
+        if any(isinstance(x, bool) or not isinstance(x, (int, float)) for r in value for x in r):
+            raise self._fail(key, "must contain only numbers")
+        arr = np.array(value, dtype=float)
+        if not np.all(np.isfinite(arr)):
+            raise self._fail(key, "contains a non-finite number (nan or inf)")
+        if rows is not None and arr.shape[0] != rows:
+            raise self._fail(key, f"must have {rows} row(s), got shape {arr.shape[0]}x{arr.shape[1]}")
+        if cols is not None and arr.shape[1] != cols:
+            raise self._fail(key, f"must have {cols} column(s), got shape {arr.shape[0]}x{arr.shape[1]}")
+        return arr
+
+    def actuator(self) -> Actuator:
+        table = self.raw.get("actuator", {})
+        if not isinstance(table, dict):
+            raise self._fail("actuator", "must be a table")
+        unknown = sorted(set(table) - _ACTUATOR_KEYS)
+        if unknown:
+            raise self._fail(f"actuator.{unknown[0]}", f"is unknown (allowed: {', '.join(sorted(_ACTUATOR_KEYS))})")
+        sub = _Reader(table, self.source)
+        limit = sub.scalar("limit", positive=True) if "limit" in table else None
+        rate = sub.scalar("rate_limit", positive=True) if "rate_limit" in table else None
+        return Actuator(limit=limit, rate_limit=rate)
+
+
+def _digest(raw: dict[str, Any]) -> str:
+    """A hash of the plant's content (not its formatting), so gains can say which plant they are for."""
+    canonical = json.dumps(raw, sort_keys=True, separators=(",", ":"))
+    return "sha256:" + hashlib.sha256(canonical.encode()).hexdigest()[:16]

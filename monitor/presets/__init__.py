@@ -1,0 +1,1 @@
+"""Plant presets shipped with the package (``paper``, ``paper-continuous``)."""
