@@ -1,0 +1,1 @@
+"""The live service: the per-vehicle loop, its recording and its publishers."""

@@ -1,0 +1,52 @@
+"""Plain records that cross from the live loop to its sinks (the Rerun recorder, tests, the demo).
+
+Why a separate module with no heavy imports: the loop builds one ``SampleRecord`` per processed sample
+and hands it to the recorder without the loop importing rerun, and ``replay`` rebuilds the same records
+from a file, so both ends agree on one shape. Plain lists (not numpy arrays) keep the records cheap to
+copy, trivially JSON-able, and free of aliasing with the estimator's mutable state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["SampleRecord", "TruthRecord"]
+
+
+@dataclass
+class SampleRecord:
+    """Everything the monitor knows about one processed sample of one vehicle.
+
+    Units: angles in degrees (``alpha``, ``elevator``), rates in deg/s (``q``), times in seconds.
+    ``t`` is the sampling instant stamped by the vehicle (MAVLink ``time_usec``), ``wall`` the monitor's
+    receive time (Unix epoch). ``y``, ``x_hat``, ``f_hat``, ``u`` and ``residual`` are in plant units.
+    """
+
+    sysid: int
+    k: int
+    t: float
+    wall: float
+    y: list[float]
+    alpha: float
+    q: float
+    elevator: float | None
+    x_hat: list[float]
+    f_hat: list[float]
+    u: list[float]
+    residual: list[float]
+    tau_obs: float | None
+    processing_s: float
+    alarm: bool
+
+
+@dataclass
+class TruthRecord:
+    """The simulator's ground truth for one sample (contract payload ``uav/<sysid>/truth``)."""
+
+    sysid: int
+    k: int
+    t: float
+    x: list[float]
+    f: list[float]
+    d: list[float]
+    tau: float | None
