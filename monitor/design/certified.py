@@ -31,6 +31,7 @@ from scipy.optimize import minimize
 
 from monitor.closed_loop import Gains, closed_loop, fault_cancelling_K3, observer_indices, steady_state
 from monitor.delay_model import b0_polytope
+from monitor.design.lmi_blocks import hinf_slack_lmi
 from monitor.design.result import DesignResult
 from monitor.design.solve import SolveFailed, solve_problem
 from monitor.errors import DesignFailed
@@ -38,7 +39,6 @@ from monitor.plant import Plant
 
 __all__ = ["design_certified", "ObserverLMI"]
 
-EPS = 1e-6
 INFEASIBLE = 1e6
 
 
@@ -91,17 +91,7 @@ class ObserverLMI:
             GA = G.T @ A_i - correction
             GB = G.T @ B_i
             for X, C_out, g in ((self.P, loop0.C_ef, self.g_e), (self.Q, loop0.C_y, self.g_z)):
-                k = C_out.shape[0]
-                block = cp.bmat(
-                    [
-                        [X - G - G.T, GA, GB, np.zeros((N, k))],
-                        [GA.T, -X, np.zeros((N, nw)), C_out.T],
-                        [GB.T, np.zeros((nw, N)), -g * np.eye(nw), np.zeros((nw, k))],
-                        [np.zeros((k, N)), C_out, np.zeros((k, nw)), -np.eye(k)],
-                    ]
-                )
-                size = 2 * N + nw + k
-                constraints.append(0.5 * (block + block.T) << -EPS * np.eye(size))
+                constraints.append(hinf_slack_lmi(X, G, GA, GB, C_out, g))
         self.problem = cp.Problem(cp.Minimize(self.g_e + weight_y * self.g_z), constraints)
 
     def solve(self, K1: np.ndarray, K2: np.ndarray) -> _Solution | None:

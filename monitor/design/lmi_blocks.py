@@ -1,0 +1,32 @@
+"""The one LMI block every design here uses: discrete H-infinity with a slack matrix (the paper's (16)/(17)).
+
+    [[X - G - G^T, G^T A, G^T B, 0], [A^T G, -X, 0, C^T], [B^T G, 0, -g I, 0], [0, C, 0, -I]] < 0
+
+implies ``A^T X A - X + C^T C + ... < 0`` with the same X, i.e. stability and an H-infinity bound
+``sqrt(g)`` from the input of B to the output C. ``GA`` and ``GB`` are passed in already multiplied
+(each method has its own change of variables that makes them affine).
+"""
+
+from __future__ import annotations
+
+import cvxpy as cp
+import numpy as np
+
+EPS = 1e-6
+
+
+def hinf_slack_lmi(X, G, GA, GB, C: np.ndarray, g) -> cp.Constraint:
+    """The constraint above, symmetrised explicitly (cvxpy wants a symmetric expression)."""
+    N = C.shape[1]
+    k = C.shape[0]
+    nw = GB.shape[1]
+    block = cp.bmat(
+        [
+            [X - G - G.T, GA, GB, np.zeros((N, k))],
+            [GA.T, -X, np.zeros((N, nw)), C.T],
+            [GB.T, np.zeros((nw, N)), -g * np.eye(nw), np.zeros((nw, k))],
+            [np.zeros((k, N)), C, np.zeros((k, nw)), -np.eye(k)],
+        ]
+    )
+    size = 2 * N + nw + k
+    return 0.5 * (block + block.T) << -EPS * np.eye(size)

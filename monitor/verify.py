@@ -1,0 +1,172 @@
+"""An independent check of any gains on the real closed loop, sharing nothing with the LMI designs.
+
+It rebuilds the loop with the ``u(k-1)`` state (``monitor.closed_loop``) from the plant and the gains alone
+and reports:
+
+* ``rho_max``/``tau_worst``: the largest spectral radius over a dense grid of constant delays;
+* ``rho_time_varying``: the growth rate of long products of loop matrices with the delay switching at
+  random (and between the interval's ends) every sample, a lower bound of the joint spectral radius:
+  > 1 means some delay sequence makes the loop diverge even if every constant delay is fine;
+* ``hinf_ef``/``hinf_y``: the worst over delays of the H-infinity norm from ``w = [d; Delta f]`` to ``e_f``
+  and to ``y~``, from a dense frequency sweep refined near the peak (no LMI, no python-control);
+* ``certificate_valid``: when the gains file carries Lyapunov matrices and polytope vertices, the
+  Bounded Real Lemma re-checked in numpy at every vertex, plus a check that every ``B0(tau)`` of the
+  grid lies inside the polytope (a linear program per point).
+
+``stable`` is true only when ``rho_max < 1`` and ``rho_time_varying < 1``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.optimize import linprog, minimize_scalar
+
+from monitor.closed_loop import Gains, LoopMatrices, closed_loop, steady_state
+from monitor.delay_model import b0_of_tau, tau_grid
+from monitor.plant import Plant
+
+__all__ = ["Verdict", "verify_gains", "hinf_norm"]
+
+
+@dataclass
+class Verdict:
+    stable: bool
+    rho_max: float
+    tau_worst: float
+    rho_time_varying: float
+    hinf_ef: float
+    hinf_y: float
+    tau_hinf_worst: float
+    fault_leak: float | None
+    certificate_valid: bool | None
+    certificate_detail: str
+    gamma_e_claimed: float | None = None
+    gamma_z_claimed: float | None = None
+    bound_holds: bool | None = None
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def hinf_norm(A: np.ndarray, B: np.ndarray, C: np.ndarray, points: int = 2048) -> float:
+    """``sup_w sigma_max(C (e^{jw} I - A)^-1 B)`` of a stable discrete system; inf when unstable."""
+    if np.max(np.abs(np.linalg.eigvals(A))) >= 1.0:
+        return float("inf")
+    n = A.shape[0]
+
+    def gain(omega: float | np.ndarray) -> np.ndarray:
+        z = np.exp(1j * np.atleast_1d(omega))
+        resolvent = z[:, None, None] * np.eye(n) - A
+        H = C @ np.linalg.solve(resolvent, np.broadcast_to(B, (z.size, *B.shape)))
+        return np.linalg.svd(H, compute_uv=False)[:, 0]
+
+    omegas = np.concatenate([np.linspace(0.0, np.pi, points), np.geomspace(1e-5, 1e-1, 200)])
+    values = gain(omegas)
+    i = int(np.argmax(values))
+    step = np.pi / (points - 1)
+    lo, hi = max(omegas[i] - step, 0.0), min(omegas[i] + step, np.pi)
+    res = minimize_scalar(lambda w: -gain(w)[0], bounds=(lo, hi), method="bounded", options={"xatol": 1e-9})
+    return float(max(values[i], -res.fun))
+
+
+def _loops(plant: Plant, gains: Gains, taus: np.ndarray, steady) -> list[LoopMatrices]:
+    return [closed_loop(plant, gains, b0_of_tau(plant, float(t)), steady=steady) for t in taus]
+
+
+def _growth_rate(mats: list[np.ndarray], rng: np.random.Generator, steps: int = 3000) -> float:
+    """Largest per-step growth of ``||A(k) ... A(1)||`` over a few switching patterns (renormalised)."""
+    N = mats[0].shape[0]
+    patterns = [
+        rng.integers(0, len(mats), steps),  # i.i.d. delays over the grid
+        np.arange(steps) % 2 * (len(mats) - 1),  # alternate the two ends of the interval
+        rng.integers(0, 2, steps) * (len(mats) - 1),  # random ends
+    ]
+    worst = 0.0
+    for pattern in patterns:
+        V = np.eye(N)
+        log_growth = 0.0
+        for j in pattern:
+            V = mats[j] @ V
+            s = np.linalg.norm(V, 2)
+            if not np.isfinite(s) or s == 0.0:
+                break
+            log_growth += np.log(s)
+            V /= s
+        worst = max(worst, float(np.exp(log_growth / steps)))
+    return worst
+
+
+def _check_certificate(plant: Plant, gains: Gains, certificate: dict[str, np.ndarray], gamma_e: float | None,
+                       gamma_z: float | None, steady, taus: np.ndarray) -> tuple[bool | None, str]:
+    """Re-check a polytopic certificate: containment of every B0(tau), then the BRL at every vertex."""
+    if not {"P", "Q", "vertices"} <= set(certificate) or gamma_e is None or gamma_z is None:
+        return None, "no polytopic certificate in the gains file"
+    P, Q, vertices = certificate["P"], certificate["Q"], certificate["vertices"]
+    N = 2 * plant.n + plant.q + plant.m
+    if P.shape != (N, N) or Q.shape != (N, N) or vertices.shape[1] != plant.B0.size:
+        return False, "certificate matrices do not fit the real closed loop of this plant"
+    for t in taus:
+        point = b0_of_tau(plant, float(t)).ravel()
+        k = len(vertices)
+        res = linprog(np.zeros(k), A_eq=np.vstack([vertices.T, np.ones((1, k))]), b_eq=np.append(point, 1.0),
+                      bounds=[(0, None)] * k, method="highs")
+        if res.status != 0:
+            return False, f"B0(tau = {t:.4f}) lies outside the certificate's polytope"
+    if np.min(np.linalg.eigvalsh(P)) <= 0 or np.min(np.linalg.eigvalsh(Q)) <= 0:
+        return False, "certificate matrices are not positive definite"
+    for v in vertices:
+        loop = closed_loop(plant, gains, v.reshape(plant.B0.shape), steady=steady)
+        for X, C, gamma in ((P, loop.C_ef, gamma_e), (Q, loop.C_y, gamma_z)):
+            A, B = loop.A, loop.B
+            brl = np.block([[A.T @ X @ A - X + C.T @ C, A.T @ X @ B], [B.T @ X @ A, B.T @ X @ B - gamma**2 * np.eye(B.shape[1])]])
+            top = float(np.max(np.linalg.eigvalsh(0.5 * (brl + brl.T))))
+            if top >= 0.0:
+                return False, f"Bounded Real Lemma fails at a vertex (largest eigenvalue {top:.3g})"
+    return True, f"common P, Q valid at all {len(vertices)} vertices; polytope contains B0(tau) on {len(taus)} grid points"
+
+
+def verify_gains(plant: Plant, gains: Gains, certificate: dict[str, np.ndarray] | None = None,
+                 gamma_e: float | None = None, gamma_z: float | None = None, grid_points: int = 201,
+                 seed: int = 0) -> Verdict:
+    """The verdict on ``gains`` for every delay in the plant's interval (see the module docstring)."""
+    gains.check_shapes(plant)
+    taus = tau_grid(plant, grid_points)
+    try:
+        steady = steady_state(plant, gains)
+        S_x = steady[0]
+        fault_leak: float | None = float(np.linalg.norm(plant.C @ S_x, 2))
+    except ValueError:
+        steady = (np.zeros((plant.n, plant.q)), np.zeros((plant.m, plant.q)))
+        fault_leak = None  # a pole at 1: a constant fault has no steady state
+    loops = _loops(plant, gains, taus, steady)
+    radii = np.array([np.max(np.abs(np.linalg.eigvals(lp.A))) for lp in loops])
+    i_worst = int(np.argmax(radii))
+    rho_tv = _growth_rate([lp.A for lp in loops], np.random.default_rng(seed))
+    hinf_taus = np.unique(np.linspace(0, len(taus) - 1, 41).astype(int))
+    ef = [hinf_norm(loops[i].A, loops[i].B, loops[i].C_ef) for i in hinf_taus]
+    yy = [hinf_norm(loops[i].A, loops[i].B, loops[i].C_y) for i in hinf_taus]
+    j_worst = int(np.argmax(ef))
+    cert_ok, detail = (None, "no certificate given")
+    if certificate:
+        cert_ok, detail = _check_certificate(plant, gains, certificate, gamma_e, gamma_z, steady, taus)
+    stable = bool(radii[i_worst] < 1.0 and rho_tv < 1.0)
+    bound_holds = None
+    if gamma_e is not None and gamma_z is not None:
+        bound_holds = bool(stable and max(ef) <= gamma_e * (1 + 1e-6) and max(yy) <= gamma_z * (1 + 1e-6))
+    return Verdict(
+        stable=stable,
+        rho_max=float(radii[i_worst]),
+        tau_worst=float(taus[i_worst]),
+        rho_time_varying=rho_tv,
+        hinf_ef=float(max(ef)),
+        hinf_y=float(max(yy)),
+        tau_hinf_worst=float(taus[hinf_taus[j_worst]]),
+        fault_leak=fault_leak,
+        certificate_valid=cert_ok,
+        certificate_detail=detail,
+        gamma_e_claimed=gamma_e,
+        gamma_z_claimed=gamma_z,
+        bound_holds=bound_holds,
+    )
