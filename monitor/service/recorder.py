@@ -1,0 +1,342 @@
+"""Write every processed sample of the live loop to a Rerun recording (.rrd), cheaply and without loss.
+
+Why this shape: ``RecordingStream.log`` costs 50-90 us per call, far too much for a loop that must answer
+each vehicle within a sample, while ``send_columns`` costs about 2 us per scalar when many rows go in
+one call. So ``submit`` only appends the record to an in-memory deque (lock-free under the GIL, well
+under a microsecond, and safe to call from a signal handler's thread), and a background writer thread
+turns the pending records into columns and ships them with ``send_columns``:
+
+* flush policy: the writer polls every ``poll_s`` (10 ms) and writes everything pending as soon as
+  ``batch_size`` (64) records are waiting or the oldest one has waited ``max_age_s`` (0.5 s), so the
+  file lags the loop by at most ~0.5 s and batches grow by themselves when the rate is high;
+* never drop: the deque is unbounded. If the writer falls behind (it has ~50x headroom: see
+  ``benchmarks/bench_recorder.py``), memory grows until it catches up; nothing is discarded.
+  ``close()`` writes whatever is left;
+* never raise into the loop: any failure in the writer is logged once per kind (one line) and counted
+  in ``stats``; only the constructor raises (``UserError``, before the loop starts) when the file
+  cannot be created.
+
+Entity paths (units: deg, deg/s, s; vectors are split into one scalar entity per component ``<i>``)::
+
+    /vehicle/<sysid>/measured/alpha        angle of attack, deg
+    /vehicle/<sysid>/measured/q            pitch rate, deg/s
+    /vehicle/<sysid>/measured/elevator     measured elevator deflection, deg (rows only when reported)
+    /vehicle/<sysid>/measured/y/<i>        the output vector fed to the observer, plant units
+    /vehicle/<sysid>/estimate/x_hat/<i>    state estimate at k (before the update)
+    /vehicle/<sysid>/estimate/f_hat/<i>    fault estimate at k (the one used in u(k))
+    /vehicle/<sysid>/command/u/<i>         command sent back for sample k
+    /vehicle/<sysid>/residual/<i>          y(k) - C x_hat(k)
+    /vehicle/<sysid>/timing/tau_obs        delay observed by the monitor, s (rows only when observed)
+    /vehicle/<sysid>/timing/processing_ms  monitor processing time of the sample, ms
+    /vehicle/<sysid>/alarm                 1.0 while the fault alarm is raised, else 0.0
+    /vehicle/<sysid>/truth/x/<i>           simulator ground truth (uav/<sysid>/truth), when subscribed
+    /vehicle/<sysid>/truth/f/<i>
+    /vehicle/<sysid>/truth/d/<i>
+    /vehicle/<sysid>/truth/tau             true delay, s (rows only when known)
+
+Timelines: ``sample`` (sequence, k), ``time`` (duration, the sampling instant t in s) and, for the
+monitor's own rows, ``wall_time`` (timestamp, receive time). Recording properties (strings) sit under
+``/__properties/fault_monitor``; ``layout`` names the version of this table. ``monitor.replay`` reads
+the same paths back; ``RECORDING.md`` beside this file is the user-facing copy of the table.
+"""
+
+from __future__ import annotations
+
+import atexit
+import collections
+import logging
+import platform
+import threading
+import time
+import weakref
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from monitor.errors import UserError
+from monitor.service.records import SampleRecord, TruthRecord
+
+__all__ = [
+    "RrdRecorder",
+    "LAYOUT_VERSION",
+    "PROPERTY_NAME",
+    "SAMPLE_SCALARS",
+    "SAMPLE_VECTORS",
+    "TRUTH_SCALARS",
+    "TRUTH_VECTORS",
+    "software_versions",
+    "default_blueprint",
+]
+
+log = logging.getLogger(__name__)
+
+LAYOUT_VERSION = "1"
+PROPERTY_NAME = "fault_monitor"
+
+# Record field -> entity path below /vehicle/<sysid>/, with the scale applied on write (replay divides).
+SAMPLE_SCALARS: dict[str, tuple[str, float]] = {
+    "alpha": ("measured/alpha", 1.0),
+    "q": ("measured/q", 1.0),
+    "elevator": ("measured/elevator", 1.0),
+    "tau_obs": ("timing/tau_obs", 1.0),
+    "processing_s": ("timing/processing_ms", 1e3),
+    "alarm": ("alarm", 1.0),
+}
+SAMPLE_VECTORS: dict[str, str] = {
+    "y": "measured/y",
+    "x_hat": "estimate/x_hat",
+    "f_hat": "estimate/f_hat",
+    "u": "command/u",
+    "residual": "residual",
+}
+TRUTH_SCALARS: dict[str, tuple[str, float]] = {"tau": ("truth/tau", 1.0)}
+TRUTH_VECTORS: dict[str, str] = {"x": "truth/x", "f": "truth/f", "d": "truth/d"}
+
+_DISTRIBUTIONS = {
+    "fault_monitor_version": "uav-fault-monitor",
+    "rerun_sdk_version": "rerun-sdk",
+    "pymavlink_version": "pymavlink",
+    "zenoh_version": "eclipse-zenoh",
+    "numpy_version": "numpy",
+}
+
+
+def software_versions() -> dict[str, str]:
+    """Versions worth keeping with a recording: ``.rrd`` files only promise to open in the next Rerun."""
+    out = {"python_version": platform.python_version()}
+    for key, dist in _DISTRIBUTIONS.items():
+        try:
+            out[key] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[key] = "not installed"
+    return out
+
+
+def default_blueprint(sysids: Iterable[int]):  # -> rerun.blueprint.Blueprint
+    """The layout ``rerun FILE.rrd`` opens on: per vehicle, f_hat vs the true fault, alpha, q, u, delay."""
+    import rerun.blueprint as rrb
+
+    def vehicle(sysid: int):
+        o = f"/vehicle/{sysid}"
+        return rrb.Grid(
+            rrb.TimeSeriesView(origin=o, contents=[f"{o}/estimate/f_hat/**", f"{o}/truth/f/**"],
+                               name=f"#{sysid} f_hat vs true fault"),
+            rrb.TimeSeriesView(origin=o, contents=[f"{o}/measured/alpha"], name=f"#{sysid} alpha (deg)"),
+            rrb.TimeSeriesView(origin=o, contents=[f"{o}/measured/q"], name=f"#{sysid} q (deg/s)"),
+            rrb.TimeSeriesView(origin=o, contents=[f"{o}/command/u/**", f"{o}/measured/elevator"],
+                               name=f"#{sysid} u and elevator"),
+            rrb.TimeSeriesView(origin=o, contents=[f"{o}/timing/tau_obs", f"{o}/truth/tau"],
+                               name=f"#{sysid} delay (s)"),
+            grid_columns=2,
+            name=f"vehicle {sysid}",
+        )
+
+    ids = sorted(sysids)
+    if not ids:
+        root = rrb.TimeSeriesView(origin="/vehicle", name="all series")
+    elif len(ids) == 1:
+        root = vehicle(ids[0])
+    else:
+        root = rrb.Tabs(*[vehicle(s) for s in ids])
+    return rrb.Blueprint(root, rrb.TimePanel(timeline="sample"), collapse_panels=False)
+
+
+def _columns(records: Sequence[object], scalars: dict[str, tuple[str, float]],
+             vectors: dict[str, str]) -> Iterator[tuple[str, np.ndarray, np.ndarray]]:
+    """Yield ``(relative path, row mask, values)`` per scalar entity; a ``None`` field leaves its row out."""
+    n = len(records)
+    for field, (path, scale) in scalars.items():
+        raw = [getattr(r, field) for r in records]
+        mask = np.fromiter((v is not None for v in raw), bool, n)
+        values = np.fromiter((float(v) * scale if v is not None else 0.0 for v in raw), float, n)
+        yield path, mask, values
+    for field, path in vectors.items():
+        raw = [getattr(r, field) for r in records]
+        width = max((len(v) for v in raw), default=0)
+        for i in range(width):
+            mask = np.fromiter((len(v) > i for v in raw), bool, n)
+            values = np.fromiter((float(v[i]) if len(v) > i else 0.0 for v in raw), float, n)
+            yield f"{path}/{i}", mask, values
+
+
+def _by_sysid(records: Iterable[SampleRecord | TruthRecord]) -> dict[int, list]:
+    groups: dict[int, list] = {}
+    for r in records:
+        groups.setdefault(int(r.sysid), []).append(r)
+    return groups
+
+
+class RrdRecorder:
+    """Buffered, lossless, never-raising writer of ``SampleRecord``/``TruthRecord`` to one ``.rrd`` file.
+
+    ``submit``/``submit_truth`` may be called from any thread (the loop, a Zenoh callback); ``close``
+    is idempotent and safe from a signal handler: it stops the writer, writes what is left, the
+    blueprint and the footer. It is also registered with ``atexit`` so a normal interpreter exit
+    leaves a complete file even when the caller forgets.
+    """
+
+    def __init__(self, path: str | Path, application_id: str = "fault-monitor",
+                 properties: dict[str, str] | None = None, *, batch_size: int = 64, max_age_s: float = 0.5,
+                 poll_s: float = 0.01, recording_name: str | None = None) -> None:
+        import rerun as rr
+
+        self.path = Path(path)
+        self.batch_size = batch_size
+        self.max_age_s = max_age_s
+        self.poll_s = poll_s
+        self._rr = rr
+        self._pending: collections.deque[SampleRecord | TruthRecord] = collections.deque()
+        self._oldest: float | None = None  # monotonic time of the oldest pending record (approximate)
+        self._sysids: set[int] = set()
+        self._blueprint_ids: frozenset[int] = frozenset()
+        self._failures: set[str] = set()
+        self._stop = threading.Event()
+        self._closed = False
+        self._close_lock = threading.Lock()
+        self.stats = {"submitted": 0, "written": 0, "failed": 0}
+
+        if self.path.is_dir() or not self.path.parent.is_dir():
+            raise UserError(f"cannot write recording {self.path}: not a file in an existing directory")
+        try:
+            self._rec = rr.RecordingStream(application_id)
+            self._rec.save(str(self.path), default_blueprint=default_blueprint(()))
+            props = {"layout": LAYOUT_VERSION, **software_versions(), **(properties or {})}
+            self._rec.send_property(PROPERTY_NAME, rr.AnyValues(**{k: str(v) for k, v in props.items()}))
+            self._rec.send_recording_name(recording_name or f"{application_id} {self.path.stem}")
+        except (OSError, RuntimeError, ValueError) as exc:
+            raise UserError(f"cannot write recording {self.path}: {exc}") from exc
+
+        self._thread = threading.Thread(target=self._run, name="rrd-recorder", daemon=True)
+        self._thread.start()
+        atexit.register(_close_ref, weakref.ref(self))
+
+    # -- the loop's side: O(1), no locks, no I/O -------------------------------------------------------
+
+    def submit(self, rec: SampleRecord) -> None:
+        """Queue one processed sample; it will be in the file after the next flush or ``close()``."""
+        self._queue(rec)
+
+    def submit_truth(self, rec: TruthRecord) -> None:
+        """Queue one ground-truth sample from the simulator (``uav/<sysid>/truth``)."""
+        self._queue(rec)
+
+    def _queue(self, rec: SampleRecord | TruthRecord) -> None:
+        if self._closed:
+            self._fail_once("closed", "record submitted after close() is not written")
+            return
+        if not self._pending:
+            self._oldest = time.monotonic()
+        self._pending.append(rec)
+        self.stats["submitted"] += 1
+
+    # -- the writer's side ------------------------------------------------------------------------------
+
+    def _due(self) -> bool:
+        if len(self._pending) >= self.batch_size:
+            return True
+        oldest = self._oldest
+        return bool(self._pending) and oldest is not None and time.monotonic() - oldest >= self.max_age_s
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.poll_s):
+            if self._due():
+                self._drain()
+
+    def _drain(self) -> None:
+        """Take everything pending (other threads may keep appending) and write it, never raising."""
+        batch = []
+        self._oldest = time.monotonic()
+        while self._pending:
+            batch.append(self._pending.popleft())
+        if not batch:
+            return
+        samples = [r for r in batch if isinstance(r, SampleRecord)]
+        truths = [r for r in batch if isinstance(r, TruthRecord)]
+        self._write(samples, SAMPLE_SCALARS, SAMPLE_VECTORS, wall=True)
+        self._write(truths, TRUTH_SCALARS, TRUTH_VECTORS, wall=False)
+        if self._sysids != self._blueprint_ids:
+            self._guard("blueprint", lambda: self._send_blueprint())
+
+    def _write(self, records: list, scalars: dict[str, tuple[str, float]], vectors: dict[str, str],
+               wall: bool) -> None:
+        for sysid, recs in _by_sysid(records).items():
+            ok = self._guard("write", lambda: self._write_vehicle(sysid, recs, scalars, vectors, wall))
+            self.stats["written" if ok else "failed"] += len(recs)
+            if ok:
+                self._sysids.add(sysid)
+
+    def _write_vehicle(self, sysid: int, recs: list, scalars: dict[str, tuple[str, float]],
+                       vectors: dict[str, str], wall: bool) -> None:
+        rr = self._rr
+        n = len(recs)
+        k = np.fromiter((r.k for r in recs), np.int64, n)
+        t = np.fromiter((r.t for r in recs), float, n)
+        w = np.fromiter((r.wall for r in recs), float, n) if wall else None
+        for path, mask, values in _columns(recs, scalars, vectors):
+            if not mask.any():
+                continue
+            full = bool(mask.all())
+            index = [rr.TimeColumn("sample", sequence=k if full else k[mask]),
+                     rr.TimeColumn("time", duration=t if full else t[mask])]
+            if w is not None:
+                index.append(rr.TimeColumn("wall_time", timestamp=w if full else w[mask]))
+            self._rec.send_columns(f"/vehicle/{sysid}/{path}", indexes=index,
+                                   columns=rr.Scalars.columns(scalars=values if full else values[mask]),
+                                   strict=True)
+
+    def _send_blueprint(self) -> None:
+        ids = frozenset(self._sysids)
+        self._rec.send_blueprint(default_blueprint(ids), make_active=True, make_default=True)
+        self._blueprint_ids = ids
+
+    def _guard(self, kind: str, fn: Callable[[], None]) -> bool:
+        """Run ``fn``; on failure log one line per kind (not per batch) and report False."""
+        try:
+            fn()
+            return True
+        except Exception as exc:  # noqa: BLE001 - a recorder must never take the loop down
+            self._fail_once(kind, f"{type(exc).__name__}: {exc}")
+            return False
+
+    def _fail_once(self, kind: str, message: str) -> None:
+        if kind not in self._failures:
+            self._failures.add(kind)
+            log.error("rrd recorder %s failed (%s); the loop goes on, see recorder stats", kind, message)
+
+    # -- shutdown -------------------------------------------------------------------------------------
+
+    def close(self, timeout_s: float = 10.0) -> None:
+        """Write everything submitted so far, the blueprint and the footer. Idempotent, never raises."""
+        if not self._close_lock.acquire(blocking=False):
+            return  # another thread (or an interrupted frame of this one) is closing already
+        try:
+            if self._closed:
+                return
+            self._closed = True
+            self._stop.set()
+            if self._thread is not threading.current_thread():
+                self._thread.join(timeout_s)
+            if self._thread.is_alive():
+                self._fail_once("close", f"writer thread still busy after {timeout_s} s")
+            self._drain()
+            self._guard("close", self._finish)
+        finally:
+            self._close_lock.release()
+
+    def _finish(self) -> None:
+        self._rec.flush()
+        self._rec.disconnect()  # drops the file sink: writes the footer
+
+    def __enter__(self) -> RrdRecorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _close_ref(ref: weakref.ref[RrdRecorder]) -> None:
+    rec = ref()
+    if rec is not None:
+        rec.close()
