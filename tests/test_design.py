@@ -1,0 +1,91 @@
+"""Design -> independent verify round trips for every method on both presets (real Clarabel solves)."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from monitor.closed_loop import Gains, closed_loop, observer_indices
+from monitor.design import run_design
+from monitor.design.paper import lemma3_K2_K3
+from monitor.errors import DesignFailed
+from monitor.plant import load_plant, parse_plant
+from monitor.verify import verify_gains
+
+_cache: dict = {}
+
+
+def designed(preset: str, method: str):
+    if (preset, method) not in _cache:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            plant = load_plant(preset)
+            _cache[(preset, method)] = (plant, run_design(method, plant))
+    return _cache[(preset, method)]
+
+
+@pytest.mark.parametrize("preset", ["paper", "paper-continuous"])
+def test_certified_design_is_certified_stable_and_meets_its_bound(preset):
+    plant, result = designed(preset, "certified")
+    assert result.gamma_e <= 2.0  # the issue's target; the floor is about 1.618
+    assert result.gamma_e >= 1.6
+    v = verify_gains(plant, result.gains, result.certificate, result.gamma_e, result.gamma_z)
+    assert v.stable and v.rho_max < 0.8 and v.rho_time_varying < 1
+    assert v.certificate_valid is True
+    assert v.hinf_ef <= result.gamma_e * (1 + 1e-6) and v.hinf_y <= result.gamma_z * (1 + 1e-6)
+    assert v.hinf_ef >= 1.6  # no design beats the floor of Delta f -> e_f
+    assert v.fault_leak < 1e-9
+
+
+def test_a_tampered_certificate_is_rejected():
+    plant, result = designed("paper", "certified")
+    cert = dict(result.certificate)
+    cert["P"] = cert["P"] * np.diag([1, 1, 1, 1, 1, 50.0])
+    v = verify_gains(plant, result.gains, cert, result.gamma_e, result.gamma_z)
+    assert v.certificate_valid is False
+
+
+def test_paper_method_works_on_the_continuous_plant():
+    plant, result = designed("paper-continuous", "paper")
+    assert verify_gains(plant, result.gains).stable
+
+
+def test_paper_method_cannot_pass_on_the_printed_example_and_why():
+    """Lemma 3's K2 = -B0^+ B1 admits no stabilising K1 at all for the printed matrices.
+
+    The controller block [x; u(k-1)] of the real loop at the nominal delay, with K2 fixed by Lemma 3,
+    has a spectral radius >= 1 for every K1 on a wide grid: the design cannot be rescued by any K1.
+    """
+    plant, result = designed("paper", "paper")
+    assert not verify_gains(plant, result.gains).stable
+    K2, K3 = lemma3_K2_K3(plant)
+    sx, _, _, su = observer_indices(plant)
+    idx = list(range(sx.start, sx.stop)) + list(range(su.start, su.stop))
+    for k1 in np.linspace(-50, 50, 2001):
+        g = Gains(L=result.gains.L, M=result.gains.M, K1=np.array([[k1]]), K2=K2, K3=K3)
+        A = closed_loop(plant, g, plant.B0, steady=(np.zeros((2, 1)), np.zeros((1, 1)))).A
+        assert np.max(np.abs(np.linalg.eigvals(A[np.ix_(idx, idx)]))) >= 1.0
+
+
+@pytest.mark.parametrize("preset", ["paper", "paper-continuous"])
+def test_separate_design_is_stable_only_at_the_nominal_delay(preset):
+    """The baseline's observer and controller are each optimal at tau_bar, but the delay couples them."""
+    plant, result = designed(preset, "separate")
+    nominal = closed_loop(plant, result.gains, plant.B0)
+    assert np.max(np.abs(np.linalg.eigvals(nominal.A))) < 1.0
+    assert result.gamma_e < 1.7  # the observer alone is near the 1.618 floor...
+    assert not verify_gains(plant, result.gains).stable  # ...but the real loop over the interval is not stable
+
+
+def test_infeasible_design_fails_cleanly():
+    # C = 0: neither the state nor the fault is observable, so no observer exists.
+    text = 'form="discrete"\nh=1.0\ntau_min=0.0\ntau_max=0.3\nA=[[0.5, 0.1], [0.0, 0.4]]\nB0=[[0.2], [0.3]]\n' \
+           'B1=[[0.1], [0.1]]\nC=[[0.0, 0.0]]\nDf=[[0.2], [0.2]]\nDd=[[0.0], [0.2]]\nE=[[0.0], [1.0]]\n'
+    plant = parse_plant(text, source="unobservable.toml")
+    for method in ("certified", "paper"):
+        with pytest.raises(DesignFailed):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                run_design(method, plant, **({"max_evaluations": 6} if method == "certified" else {}))
