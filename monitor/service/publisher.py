@@ -1,0 +1,125 @@
+"""Zenoh side of the monitor: estimates, alarm events, the status queryable and the liveliness token.
+
+Why a queue and a thread: the control loop must never wait for Zenoh. The loop only appends a tuple of
+references (no JSON, no copies) to an unbounded C ``SimpleQueue`` whose length it checks against
+``queue_max``; a publisher thread turns items into JSON and puts them with ``CongestionControl.BLOCK``
+(so Zenoh itself does not drop in bursts). If subscribers or the network fall behind, the thread
+blocks, the queue fills, and the loop drops *new estimates* (counted in ``dropped`` and logged at most
+every 5 s) instead of blocking. Alarm events are never dropped: they are rare, bounded by the
+hysteresis, and the one thing a listener must not miss. The status queryable always answers the
+newest estimate, dropped from the stream or not, because the loop stores it before the hand-off.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import threading
+import time
+from typing import Any
+
+import zenoh
+
+__all__ = ["EstimatePublisher", "estimate_payload", "alarm_payload"]
+
+log = logging.getLogger(__name__)
+
+_JSON = zenoh.Encoding.APPLICATION_JSON
+_STOP = object()
+
+# (sysid, k, t, f_hat, x_hat, residual, u, tau, alarm): built in the loop from references, no conversions
+EstimateItem = tuple
+
+
+def estimate_payload(item: EstimateItem, unit: str) -> dict[str, Any]:
+    """The contract's ``fault/estimate`` payload (plant units; ``tau`` = observed delay in seconds or null)."""
+    sysid, k, t, f_hat, x_hat, residual, u, tau, alarm = item
+    return {"sysid": sysid, "k": k, "t": t, "f_hat": f_hat.tolist(), "x_hat": x_hat.tolist(),
+            "residual": residual.tolist(), "u": u.tolist(), "tau": tau, "alarm": alarm, "unit": unit}
+
+
+def alarm_payload(sysid: int, k: int, t: float, state: str, f_hat) -> dict[str, Any]:
+    """The contract's ``fault/alarm`` payload; ``state`` is "raised" or "cleared"."""
+    return {"sysid": sysid, "k": k, "t": t, "state": state, "f_hat": [float(f) for f in f_hat]}
+
+
+class EstimatePublisher:
+    """Owns the monitor's Zenoh entities (not the session) and the publisher thread."""
+
+    def __init__(self, session: zenoh.Session, prefix: str, name: str, unit: str = "deg",
+                 queue_max: int = 10_000) -> None:
+        self.session = session
+        self.prefix = prefix.rstrip("/")
+        self.unit = unit
+        self.queue_max = queue_max
+        self.dropped = 0
+        self.published = 0
+        self.latest: dict[int, EstimateItem] = {}
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._last_drop_log = 0.0
+        self.token = session.liveliness().declare_token(f"{self.prefix}/monitor/{name}")
+        self.queryable = session.declare_queryable(f"{self.prefix}/*/fault/status", self._on_query)
+        self._thread = threading.Thread(target=self._run, name="zenoh-publisher", daemon=True)
+        self._thread.start()
+
+    # --- called by the loop (hot path) -------------------------------------------------------------
+    def estimate(self, item: EstimateItem) -> None:
+        self.latest[item[0]] = item
+        if self._queue.qsize() >= self.queue_max:
+            self.dropped += 1
+            now = time.monotonic()
+            if now - self._last_drop_log > 5.0:
+                self._last_drop_log = now
+                log.warning("Zenoh publisher behind: %d estimates dropped so far (queue of %d full)",
+                            self.dropped, self.queue_max)
+            return
+        self._queue.put(item)
+
+    def alarm(self, sysid: int, k: int, t: float, state: str, f_hat) -> None:
+        self._queue.put(("alarm", alarm_payload(sysid, k, t, state, f_hat)))
+
+    # --- publisher thread ----------------------------------------------------------------------------
+    def _publisher(self, key: str) -> zenoh.Publisher:
+        pub = self._publishers.get(key)
+        if pub is None:
+            pub = self._publishers[key] = self.session.declare_publisher(
+                key, encoding=_JSON, congestion_control=zenoh.CongestionControl.BLOCK)
+        return pub
+
+    def _run(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is _STOP:
+                return
+            try:
+                if item[0] == "alarm":
+                    payload = item[1]
+                    key = f"{self.prefix}/{payload['sysid']}/fault/alarm"
+                else:
+                    payload = estimate_payload(item, self.unit)
+                    key = f"{self.prefix}/{item[0]}/fault/estimate"
+                self._publisher(key).put(json.dumps(payload))
+                self.published += 1
+            except Exception as exc:  # a closed session or a bad value costs a log line, not the thread
+                log.debug("publish failed: %s", exc)
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        """Answer with each matching vehicle's latest estimate, on that vehicle's concrete key."""
+        try:
+            wanted = query.key_expr
+            for sysid, item in list(self.latest.items()):
+                key = f"{self.prefix}/{sysid}/fault/status"
+                if wanted.intersects(zenoh.KeyExpr(key)):
+                    query.reply(key, json.dumps(estimate_payload(item, self.unit)), encoding=_JSON)
+        except Exception as exc:
+            log.debug("status query failed: %s", exc)
+
+    def close(self, timeout: float = 2.0) -> list[Any]:
+        """Drain what is queued (bounded by ``timeout``), stop the thread; return entities to undeclare."""
+        self._queue.put(_STOP)
+        self._thread.join(timeout)
+        if self._thread.is_alive():
+            log.warning("Zenoh publisher still busy after %.1f s; %d items not sent", timeout, self._queue.qsize())
+        return [self.queryable, *self._publishers.values(), self.token]
