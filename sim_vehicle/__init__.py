@@ -1,0 +1,1 @@
+"""sim-vehicle: the simulated UAV that the fault monitor is tested against (see README.md here)."""

@@ -1,0 +1,5 @@
+import sys
+
+from sim_vehicle.cli import main
+
+sys.exit(main())

@@ -1,0 +1,172 @@
+"""``sim-vehicle``: a MAVLink vehicle daemon that flies the continuous plant under delay, faults and wind.
+
+``sim-vehicle run`` is the only sub-command. It is the "real world" the monitor is tested against: the
+monitor only sees what crosses the wire, while the exact truth goes to Zenoh ``<prefix>/<sysid>/truth``.
+Errors the user can fix are one line on stderr and exit code 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import logging
+import sys
+
+from monitor.errors import UserError
+from monitor.wire.zenoh_session import add_zenoh_arguments, close_quietly, config_from_args, key, open_session
+
+__all__ = ["build_parser", "main"]
+
+log = logging.getLogger("sim_vehicle")
+
+EXAMPLES = """\
+examples:
+  # the paper's scenario, 100 samples at h = 1 s, 20 times faster than real time
+  sim-vehicle run --plant paper-continuous --steps 100 --speedup 20 --fault bias:2@20
+
+  # a rough link: 5 % loss, 2 % duplicates, 2 % reordering, normal delay, a signed link
+  sim-vehicle run --delay normal:0.2:0.05 --loss 0.05 --duplicate 0.02 --reorder 0.02 --signing-key key.txt
+
+  # watch the ground truth from another terminal
+  sim-vehicle run --zenoh-listen tcp/127.0.0.1:7447 &
+  fault-monitor subscribe --zenoh-connect tcp/127.0.0.1:7447 'uav/*/truth'
+
+SPECs: fault bias:2@20, bias:2@20-60 (end exclusive), ramp:0.1@20, loe:0.5@20, stuck@30, stuck:5@30,
+joined by '+'; delay const:0.2, uniform:0:0.46, normal:0.2:0.05, trace:FILE; wind paper, none,
+turbulence:SIGMA[:TAU]. See sim_vehicle/README.md for the physics.
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="sim-vehicle",
+        description="Simulated UAV (short-period pitch dynamics) speaking MAVLink 2, for testing fault-monitor.",
+        epilog="Start with: sim-vehicle run --help",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    run = sub.add_parser(
+        "run",
+        help="run the vehicle daemon",
+        description=(
+            "Fly the continuous plant exactly (matrix exponentials between events). Every sampling instant "
+            "k*h the vehicle sends ATTITUDE + AOA_SSA + ACTUATOR_OUTPUT_STATUS (one datagram) to the monitor; "
+            "a SET_ACTUATOR_CONTROL_TARGET answering sample k is applied when it arrives, after the emulated "
+            "delay. Stops after --steps samples or on SIGINT/SIGTERM, prints a summary, exits 0."
+        ),
+        epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    run.add_argument("--config", metavar="FILE", help="TOML vehicle file whose keys preset these flags")
+    g = run.add_argument_group("vehicle")
+    g.add_argument("--plant", default="paper-continuous", metavar="P",
+                   help="continuous plant preset or TOML file (default: paper-continuous)")
+    g.add_argument("--sysid", type=int, default=1, metavar="N", help="MAVLink system id, 1..255 (default: 1)")
+    g.add_argument("--steps", type=int, default=None, metavar="N",
+                   help="number of samples to send, then exit (default: run until a signal)")
+    g.add_argument("--speedup", type=float, default=1.0, metavar="S",
+                   help="simulated seconds per wall-clock second; delays scale too (default: 1)")
+    g.add_argument("--seed", type=int, default=0, metavar="N", help="seed of every random draw (default: 0)")
+    g.add_argument("--fault", default=None, metavar="SPEC", help="elevator fault, e.g. bias:2@20 (default: none)")
+    g.add_argument("--wind", default="paper", metavar="SPEC",
+                   help="paper (oscillator, default), none, or turbulence:SIGMA[:TAU]")
+    g.add_argument("--sensor-noise", default=0.0, type=float, metavar="SIGMA",
+                   help="white noise added to the measured alpha and q, plant units (default: 0)")
+    g.add_argument("--x0", default=None, metavar="A,Q", help="initial state (default: 0)")
+    n = run.add_argument_group("network (emulated on top of the real UDP path)")
+    n.add_argument("--delay", default=None, metavar="SPEC",
+                   help="total sensor->actuator delay in simulated seconds (default: uniform over the plant's "
+                        "[tau_min, tau_max], 0:0.4612 for paper-continuous)")
+    n.add_argument("--delay-split", default=0.5, type=float, metavar="R",
+                   help="share of the delay spent before the sample is sent (sensor->controller); the rest is "
+                        "the controller->actuator budget (default: 0.5)")
+    n.add_argument("--loss", default=0.0, type=float, metavar="P", help="loss probability per datagram, both ways")
+    n.add_argument("--duplicate", default=0.0, type=float, metavar="P", help="duplication probability per datagram")
+    n.add_argument("--reorder", default=0.0, type=float, metavar="P",
+                   help="probability that a datagram is held ~1 sample so the next overtakes it")
+    m = run.add_argument_group("MAVLink")
+    m.add_argument("--mavlink", default="udpout:127.0.0.1:14550", metavar="udpout:HOST:PORT",
+                   help="where the monitor listens (default: udpout:127.0.0.1:14550); commands come back to "
+                        "the vehicle's own socket")
+    m.add_argument("--bind", default="127.0.0.1:0", metavar="HOST:PORT",
+                   help="the vehicle's own socket (default: 127.0.0.1:0, an ephemeral loopback port)")
+    m.add_argument("--signing-key", default=None, metavar="FILE",
+                   help="MAVLink 2 signing: 32 raw bytes, 64 hex digits or a passphrase (hashed with SHA-256 "
+                        "as MAVProxy does); unsigned, wrongly signed and replayed commands are rejected")
+    o = run.add_argument_group("outputs")
+    o.add_argument("--no-zenoh", action="store_true", help="do not publish the truth on Zenoh")
+    o.add_argument("--truth-jsonl", default=None, metavar="FILE", help="also write every truth payload to FILE")
+    o.add_argument("--summary-json", default=None, metavar="FILE", help="also write the exit summary as JSON")
+    o.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"),
+                   help="log verbosity on stderr (default: INFO)")
+    add_zenoh_arguments(run)
+    run.set_defaults(func=cmd_run)
+    return parser
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from sim_vehicle.config import settings_from_args
+    from sim_vehicle.link import CommandDecoder, load_signing_key
+
+    settings = settings_from_args(args)
+    signing_key = load_signing_key(args.signing_key) if args.signing_key else None
+    session = publisher = None
+    truth_key = key(args.key_prefix, settings.sysid, "truth")
+    if not args.no_zenoh:
+        session = open_session(config_from_args(args))
+    try:
+        from sim_vehicle.daemon import run_daemon
+        from sim_vehicle.simulation import Simulation
+        from sim_vehicle.truth import TruthPublisher
+
+        truth = TruthPublisher(session, truth_key if session is not None else None, args.truth_jsonl)
+        publisher = truth.publisher
+        sim = Simulation(
+            plant=settings.plant, sink=None, sysid=settings.sysid, steps=settings.steps,  # type: ignore[arg-type]
+            fault=settings.fault, delay=settings.delay, wind=settings.wind, impairment=settings.impairment,
+            delay_split=settings.delay_split, sensor_noise=settings.sensor_noise, seed=settings.seed, x0=settings.x0,
+        )
+        log.info("plant %s, fault %s, delay %s, wind %s, truth on %s", settings.plant.name, settings.fault,
+                 settings.delay, args.wind, truth_key if session is not None else "(no zenoh)")
+        decoder = CommandDecoder(settings.sysid, settings.plant.h, signing_key)
+        try:
+            asyncio.run(run_daemon(sim, decoder, truth, target=settings.target, bind=settings.bind,
+                                   speedup=settings.speedup, key=signing_key))
+        except OSError as exc:
+            raise UserError(f"cannot use UDP socket {settings.bind[0]}:{settings.bind[1]}: {exc.strerror}") from None
+        finally:
+            truth.close()
+        print(sim.stats.summary(), flush=True)
+        if args.summary_json:
+            with open(args.summary_json, "w", encoding="utf-8") as fh:
+                json.dump({"sysid": settings.sysid, "truth_published": truth.published, **sim.stats.as_dict()}, fh,
+                          indent=2)
+    finally:
+        close_quietly(session, publisher)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "config", None):
+        try:
+            from sim_vehicle.config import apply_config_file
+
+            apply_config_file(parser._subparsers._group_actions[0].choices["run"], args.config)  # type: ignore[union-attr]
+        except UserError as exc:
+            print(f"sim-vehicle: error: {exc}", file=sys.stderr)
+            return exc.exit_code
+        args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    logging.basicConfig(level=getattr(logging, str(args.log_level).upper(), logging.INFO),
+                        format="%(asctime)s %(name)s %(levelname)s %(message)s", stream=sys.stderr)
+    try:
+        return int(args.func(args) or 0)
+    except UserError as exc:
+        print(f"sim-vehicle {args.command}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        return 130

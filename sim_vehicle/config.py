@@ -1,0 +1,142 @@
+"""Settings of one vehicle run: command-line flags, optionally preset from a TOML vehicle file.
+
+A vehicle file holds the same names as the long flags (``-`` or ``_``), e.g.::
+
+    plant = "paper-continuous"
+    sysid = 3
+    fault = "bias:2@20"
+    delay = "normal:0.2:0.05"
+    loss = 0.02
+    zenoh_connect = ["tcp/127.0.0.1:7447"]
+
+Flags given on the command line win over the file. Why strict: an unknown key (``dealy``) silently
+ignored would run a different experiment than the one written down, so it is an error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from monitor.errors import UserError
+from monitor.plant import Plant, load_plant
+from monitor.wire.specs import DelaySampler, FaultSchedule, parse_delay_spec, parse_fault_spec
+from sim_vehicle.network import Impairment
+from sim_vehicle.wind import Wind, parse_wind_spec
+
+__all__ = ["Settings", "apply_config_file", "settings_from_args", "parse_udpout", "parse_hostport"]
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Everything a run needs, validated."""
+
+    plant: Plant
+    sysid: int
+    steps: int | None
+    speedup: float
+    fault: FaultSchedule
+    delay: DelaySampler
+    delay_split: float
+    impairment: Impairment
+    wind: Wind
+    sensor_noise: float
+    seed: int
+    x0: list[float] | None
+    target: tuple[str, int]
+    bind: tuple[str, int]
+
+
+def apply_config_file(parser: argparse.ArgumentParser, path: str) -> None:
+    """Make the keys of a TOML vehicle file the parser's defaults (flags still override them)."""
+    try:
+        raw = tomllib.loads(Path(path).read_text("utf-8"))
+    except OSError as exc:
+        raise UserError(f"--config {path}: cannot read: {exc.strerror}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise UserError(f"--config {path}: not valid TOML: {exc}") from None
+    known = {a.dest for a in parser._actions} - {"help", "config", "func"}
+    values = {}
+    for name, value in raw.items():
+        dest = name.replace("-", "_")
+        if dest not in known:
+            raise UserError(f"--config {path}: unknown key '{name}' (allowed: {', '.join(sorted(known))})")
+        values[dest] = value
+    parser.set_defaults(**values)
+
+
+def parse_hostport(text: str, what: str) -> tuple[str, int]:
+    host, sep, port = str(text).rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise UserError(f"{what} '{text}': expected HOST:PORT, e.g. 127.0.0.1:14550")
+    return host, int(port)
+
+
+def parse_udpout(text: str) -> tuple[str, int]:
+    """``udpout:HOST:PORT`` (MAVProxy's spelling) -> ``(HOST, PORT)``; ``udp:`` is accepted as an alias."""
+    scheme, sep, rest = str(text).partition(":")
+    if not sep or scheme not in ("udpout", "udp"):
+        raise UserError(f"--mavlink '{text}': expected udpout:HOST:PORT (the vehicle sends to the monitor's udpin)")
+    return parse_hostport(rest, "--mavlink")
+
+
+def _probability(value, name: str) -> float:
+    value = _number(value, name)
+    if not 0.0 <= value <= 1.0:
+        raise UserError(f"--{name} must be in [0, 1], got {value:g}")
+    return value
+
+
+def _number(value, name: str) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise UserError(f"--{name} must be a number, got {value!r}") from None
+
+
+def settings_from_args(args: argparse.Namespace) -> Settings:
+    """Validate the parsed flags into ``Settings`` (one-line ``UserError`` on anything wrong)."""
+    plant = load_plant(args.plant)
+    if plant.continuous is None:
+        raise UserError(f"--plant {args.plant}: the simulator needs a continuous plant (try paper-continuous)")
+    sysid = int(args.sysid)
+    if not 1 <= sysid <= 255:
+        raise UserError(f"--sysid must be in 1..255 (MAVLink system ids), got {sysid}")
+    steps = None if args.steps in (None, 0) else int(args.steps)
+    if steps is not None and steps < 0:
+        raise UserError(f"--steps must be positive (0: until a signal), got {steps}")
+    speedup = _number(args.speedup, "speedup")
+    if not speedup > 0:
+        raise UserError(f"--speedup must be positive, got {speedup:g}")
+    seed = int(args.seed)
+    delay_text = args.delay or f"uniform:{plant.tau_min:g}:{plant.tau_max:g}"
+    x0 = None
+    if args.x0 is not None:
+        parts = args.x0 if isinstance(args.x0, list) else str(args.x0).split(",")
+        x0 = [_number(v, "x0") for v in parts]
+        if len(x0) != plant.n:
+            raise UserError(f"--x0 needs {plant.n} comma-separated values (the state), got {len(x0)}")
+    noise = _number(args.sensor_noise, "sensor-noise")
+    if noise < 0:
+        raise UserError(f"--sensor-noise must be >= 0, got {noise:g}")
+    return Settings(
+        plant=plant,
+        sysid=sysid,
+        steps=steps,
+        speedup=speedup,
+        fault=parse_fault_spec(args.fault),
+        delay=parse_delay_spec(delay_text, seed=seed),
+        delay_split=_probability(args.delay_split, "delay-split"),
+        impairment=Impairment(
+            loss=_probability(args.loss, "loss"), duplicate=_probability(args.duplicate, "duplicate"),
+            reorder=_probability(args.reorder, "reorder"), h=plant.h, seed=seed,
+        ),
+        wind=parse_wind_spec(args.wind, plant.h, seed),
+        sensor_noise=noise,
+        seed=seed,
+        x0=x0,
+        target=parse_udpout(args.mavlink),
+        bind=parse_hostport(args.bind, "--bind"),
+    )
