@@ -34,7 +34,7 @@ def register(subparsers) -> None:
     p.add_argument("--alarm-threshold", type=float, default=1.0, metavar="X",
                    help="raise when max |f_hat| >= X (plant units) for --alarm-samples samples in a row")
     p.add_argument("--alarm-clear", type=float, default=0.5, metavar="Y",
-                   help="clear when max |f_hat| <= Y for --alarm-samples samples in a row")
+                   help="clear when max |f_hat| < Y for --alarm-samples samples in a row")
     p.add_argument("--alarm-samples", type=int, default=2, metavar="N", help="persistence of raise and clear")
     p.add_argument("--vehicle-timeout", type=float, default=10.0, metavar="S",
                    help="forget a vehicle (its estimator state) after S seconds of silence")

@@ -2,7 +2,7 @@
 
 Why hysteresis and persistence: under wind and a varying delay f_hat wanders before any fault and
 overshoots after one; a bare threshold would chatter. The alarm raises when max_i |f_hat_i| has been at
-or above ``threshold`` for ``samples`` consecutive samples, and clears when it has been at or below
+or above ``threshold`` for ``samples`` consecutive samples, and clears when it has been below
 ``clear`` for as many. Pure (no clock, no I/O), so the tests drive it with numbers.
 
 Defaults (plant units, degrees for the paper's plant), measured against the real ``sim-vehicle`` in
@@ -46,7 +46,7 @@ class Alarm:
     def update(self, magnitude: float) -> str | None:
         cfg = self.config
         if self.raised:
-            self._count = self._count + 1 if magnitude <= cfg.clear else 0
+            self._count = self._count + 1 if magnitude < cfg.clear else 0
             if self._count >= cfg.samples:
                 self.raised, self._count = False, 0
                 return "cleared"
