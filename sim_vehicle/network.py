@@ -40,7 +40,7 @@ class Impairment:
                 raise UserError(f"--{name} must be a probability in [0, 1], got {value}")
 
     def fate(self, direction: int, k: int, copy: int = 0) -> list[tuple[float, str]]:
-        """Extra delays of the copies that get through, each tagged ``"ok" | "reordered" | "duplicate"``.
+        """Extra delays of the copies that get through, each tagged ``"ok" | "reordered" | "duplicated"``.
 
         An empty list means the datagram is lost.
         """
@@ -51,5 +51,5 @@ class Impairment:
         first = (self.h * (1.0 + 0.5 * u_reorder), "reordered") if reorder < self.reorder else (0.0, "ok")
         out = [first]
         if dup < self.duplicate:
-            out.append((first[0] + self.h * 0.2 * u_dup, "duplicate"))
+            out.append((first[0] + self.h * 0.2 * u_dup, "duplicated"))
         return out
