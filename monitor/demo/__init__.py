@@ -1,0 +1,1 @@
+"""`fault-monitor demo`: the paper's comparison end to end (live daemons, Monte-Carlo, table, figures)."""

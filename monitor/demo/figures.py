@@ -1,0 +1,84 @@
+"""The paper's Figs. 3-5 for every design: f_hat against the true fault, angle of attack, pitch rate.
+
+Why fixed axis limits from the stable designs: a design that diverges would otherwise squash every other
+curve to a flat line; its curve is still drawn (clipped) and its legend entry says it left the plot.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from monitor.demo.montecarlo import Trace
+
+__all__ = ["write_figures"]
+
+COLOURS = {"certified": "tab:blue", "paper": "tab:orange", "separate": "tab:red"}
+
+
+def _limits(series: list[np.ndarray], floor: float) -> tuple[float, float]:
+    finite = [s[np.isfinite(s)] for s in series]
+    finite = [s for s in finite if s.size and np.max(np.abs(s)) < 1e3]
+    if not finite:
+        return -floor, floor
+    lo = min(float(np.min(s)) for s in finite)
+    hi = max(float(np.max(s)) for s in finite)
+    pad = 0.15 * max(hi - lo, floor)
+    return lo - pad, hi + pad
+
+
+def _panel(ax, runs: dict[str, Trace], field: str, onset: int | None, ylabel: str, title: str, truth: bool) -> None:
+    series = [getattr(t, field) for t in runs.values()]
+    if truth:
+        first = next(iter(runs.values()))
+        ax.step(first.k, first.f, where="post", color="black", lw=2.0, label="true fault f")
+        series.append(first.f)
+    lo, hi = _limits(series, 0.5)
+    for name, t in runs.items():
+        y = getattr(t, field)
+        left = bool(np.any(~np.isfinite(y)) or np.any((y < lo) | (y > hi)))
+        label = f"{name}{' (leaves the plot: diverges)' if left else ''}"
+        ax.plot(t.k, np.clip(y, lo, hi), marker=".", ms=3, lw=1.2, color=COLOURS.get(name), label=label)
+    if onset is not None:
+        ax.axvline(onset, color="grey", ls="--", lw=1)
+        ax.annotate(f"fault onset k = {onset}", (onset, hi), xytext=(4, -14), textcoords="offset points", fontsize=8, color="grey")
+    ax.set_ylim(lo, hi)
+    ax.set_xlabel("sample k (h = 1 s)")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower right")
+
+
+def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subtitle: str) -> list[Path]:
+    """Write fig3_fault_estimate.png, fig4_alpha.png, fig5_q.png and an overview; return their paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    specs = [
+        ("fig3_fault_estimate.png", "f_hat", "elevator fault (deg)", "Fig. 3: fault estimate f_hat vs true fault", True),
+        ("fig4_alpha.png", "alpha", "angle of attack alpha (deg)", "Fig. 4: angle of attack after the fault", False),
+        ("fig5_q.png", "q", "pitch rate q (deg/s)", "Fig. 5: pitch rate after the fault", False),
+    ]
+    paths = []
+    for name, field, ylabel, title, truth in specs:
+        fig, ax = plt.subplots(figsize=(8, 4.2), dpi=110)
+        _panel(ax, runs, field, onset, ylabel, f"{title}\n{subtitle}", truth)
+        fig.tight_layout()
+        path = out_dir / name
+        fig.savefig(path)
+        plt.close(fig)
+        paths.append(path)
+    fig, axes = plt.subplots(3, 1, figsize=(8, 10), dpi=100, sharex=True)
+    for ax, (_, field, ylabel, title, truth) in zip(axes, specs):
+        _panel(ax, runs, field, onset, ylabel, title, truth)
+    fig.suptitle(subtitle, fontsize=9)
+    fig.tight_layout()
+    path = out_dir / "overview.png"
+    fig.savefig(path)
+    plt.close(fig)
+    paths.append(path)
+    return paths

@@ -1,0 +1,178 @@
+"""One live run of the paper scenario: real `sim-vehicle` and `fault-monitor run` daemons on loopback.
+
+The demo's own process is the Zenoh meeting point: it listens on a free loopback TCP port, both daemons
+connect to it (no router, no multicast), and it subscribes to the estimates and the ground truth to show
+progress. The scores come from the monitor's .rrd recording (the same code as `fault-monitor replay`),
+so what the table says can be recomputed from the files it leaves behind.
+
+Every daemon is started in its own process group and stopped in a ``finally`` (SIGTERM, then SIGKILL after
+a bounded wait); every wait has a deadline.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from monitor.errors import UserError
+
+__all__ = ["Scenario", "LiveRun", "run_live", "free_port"]
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """What every design is run against (the paper's, by default)."""
+
+    plant: str = "paper-continuous"
+    steps: int = 100
+    speedup: float = 10.0
+    fault: str = "bias:2@20"
+    delay: str = "uniform:0:0.46"
+    wind: str = "paper"
+    seed: int = 0
+    sysid: int = 1
+
+
+@dataclass
+class LiveRun:
+    method: str
+    rrd: Path
+    log_dir: Path
+    estimates: list[dict] = field(default_factory=list)
+    truth: list[dict] = field(default_factory=list)
+    sim_exit: int | None = None
+    monitor_exit: int | None = None
+    wall_seconds: float = 0.0
+
+
+def free_port(kind: int) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _udp_port_taken(port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError as exc:
+            return exc.errno == errno.EADDRINUSE
+        return False
+
+
+def _wait(predicate: Callable[[], bool], timeout: float, what: str, proc: subprocess.Popen | None = None,
+          log: Path | None = None) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        if proc is not None and proc.poll() is not None:
+            tail = log.read_text(errors="replace")[-800:] if log and log.exists() else ""
+            raise UserError(f"{what}: the process exited with code {proc.returncode}; log tail: {tail.strip()}")
+        time.sleep(0.05)
+    raise UserError(f"timed out after {timeout:.0f} s waiting for {what}")
+
+
+class _Daemon:
+    """A console entry point run with this interpreter, in its own process group, always stopped."""
+
+    def __init__(self, module: str, args: list[str], log: Path) -> None:
+        self.log = log
+        self._fh = open(log, "wb")
+        env = {**os.environ, "RERUN_ANALYTICS": "0"}
+        self.proc = subprocess.Popen([sys.executable, "-m", module, *args], stdout=self._fh, stderr=subprocess.STDOUT,
+                                     stdin=subprocess.DEVNULL, env=env, start_new_session=True)
+
+    def stop(self, timeout: float = 15.0) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+                self.proc.wait(timeout=5)
+        self._fh.close()
+        return self.proc.returncode
+
+
+def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progress: Callable[[str], None]) -> LiveRun:
+    """Run one design live and return what the demo's subscriber saw (the recording is in ``out_dir``)."""
+    import zenoh
+
+    from monitor.wire.zenoh_session import build_config, close_quietly, open_session
+
+    zport, uport = free_port(socket.SOCK_STREAM), free_port(socket.SOCK_DGRAM)
+    endpoint = f"tcp/127.0.0.1:{zport}"
+    run = LiveRun(method=method, rrd=out_dir / f"{method}.rrd", log_dir=out_dir / "logs")
+    run.log_dir.mkdir(parents=True, exist_ok=True)
+    run.rrd.unlink(missing_ok=True)
+    lock = threading.Lock()
+
+    def collect(into: list[dict]) -> Callable[[zenoh.Sample], None]:
+        def on_sample(sample: zenoh.Sample) -> None:
+            try:
+                payload = json.loads(sample.payload.to_bytes())
+            except ValueError:
+                return
+            with lock:
+                into.append(payload)
+        return on_sample
+
+    session = open_session(build_config(listen=[endpoint]))
+    subs = [
+        session.declare_subscriber(f"uav/{scenario.sysid}/fault/estimate", collect(run.estimates)),
+        session.declare_subscriber(f"uav/{scenario.sysid}/truth", collect(run.truth)),
+    ]
+    monitor = sim = None
+    t0 = time.monotonic()
+    try:
+        name = f"demo-{method}-{os.getpid()}"
+        monitor = _Daemon("monitor", ["--log-level", "WARNING", "run", "--plant", scenario.plant, "--gains", str(gains),
+                                      "--mavlink", f"udpin:127.0.0.1:{uport}", "--zenoh-connect", endpoint,
+                                      "--rrd", str(run.rrd), "--name", name], run.log_dir / f"{method}-monitor.log")
+        token = f"uav/monitor/{name}"
+        _wait(lambda: any(True for _ in session.liveliness().get(token, timeout=0.2)), 60, f"monitor '{name}' on Zenoh",
+              monitor.proc, monitor.log)
+        _wait(lambda: _udp_port_taken(uport), 20, f"monitor UDP port {uport}", monitor.proc, monitor.log)
+        sim = _Daemon("sim_vehicle", ["run", "--plant", scenario.plant, "--mavlink", f"udpout:127.0.0.1:{uport}",
+                                      "--sysid", str(scenario.sysid), "--steps", str(scenario.steps),
+                                      "--speedup", str(scenario.speedup), "--fault", scenario.fault,
+                                      "--delay", scenario.delay, "--wind", scenario.wind, "--seed", str(scenario.seed),
+                                      "--zenoh-connect", endpoint, "--log-level", "WARNING"],
+                      run.log_dir / f"{method}-sim.log")
+        budget = scenario.steps / scenario.speedup + 30.0
+        deadline = time.monotonic() + budget
+        while sim.proc.poll() is None:
+            if time.monotonic() > deadline:
+                raise UserError(f"sim-vehicle did not finish {scenario.steps} samples within {budget:.0f} s")
+            with lock:
+                k = run.estimates[-1]["k"] if run.estimates else -1
+            progress(f"{method:<10} live: sample {k + 1:>4}/{scenario.steps}")
+            time.sleep(0.25)
+        run.sim_exit = sim.stop()
+        sim = None
+        linger = time.monotonic() + 3.0  # let the last estimates cross Zenoh before stopping the monitor
+        while time.monotonic() < linger and not (run.estimates and run.estimates[-1].get("k", -1) >= scenario.steps - 1):
+            time.sleep(0.05)
+    finally:
+        if sim is not None:
+            run.sim_exit = sim.stop()
+        if monitor is not None:
+            run.monitor_exit = monitor.stop()
+        close_quietly(session, *subs)
+    run.wall_seconds = time.monotonic() - t0
+    if run.monitor_exit != 0:
+        raise UserError(f"fault-monitor run ({method}) exited with {run.monitor_exit}; see {run.log_dir}/{method}-monitor.log")
+    if not run.rrd.exists():
+        raise UserError(f"fault-monitor run ({method}) wrote no recording at {run.rrd}")
+    return run
