@@ -92,11 +92,19 @@ def _seconds(column: Any) -> np.ndarray:
     return column.cast(pa.int64()).to_numpy(zero_copy_only=False) / 1e9
 
 
-def _scalars(column: Any) -> np.ndarray:
-    """A ``Scalars:scalars`` column (one list of one float per row) as a float array; NaN for empty rows."""
+def _scalars(column: Any) -> tuple[np.ndarray, np.ndarray]:
+    """A ``Scalars:scalars`` column (a list of one float per row) as (row has a value, float values).
+
+    A null or empty row means "not logged at this sample" (e.g. no elevator reading): it is skipped.
+    """
     import pyarrow.compute as pc
 
-    return pc.list_element(column, 0).to_numpy(zero_copy_only=False).astype(float) if len(column) else np.empty(0)
+    has_value = pc.fill_null(pc.greater(pc.list_value_length(column), 0), False)
+    present = has_value.to_numpy(zero_copy_only=False).astype(bool)
+    values = np.full(len(column), math.nan)
+    if present.any():
+        values[present] = pc.list_element(column.filter(has_value), 0).to_numpy(zero_copy_only=False)
+    return present, values
 
 
 def _read_chunks(path: Path) -> tuple[Any, list[Any], bool]:
@@ -144,8 +152,8 @@ def _rows(chunk: Any) -> Iterator[tuple[int, float, float | None, float]]:
     k = batch.column("sample").to_numpy(zero_copy_only=False)
     t = _seconds(batch.column("time")) if "time" in names else np.full(len(k), math.nan)
     wall = _seconds(batch.column("wall_time")) if "wall_time" in names else None
-    values = _scalars(batch.column("Scalars:scalars"))
-    for i in range(len(k)):
+    present, values = _scalars(batch.column("Scalars:scalars"))
+    for i in np.flatnonzero(present):
         yield int(k[i]), float(t[i]), (float(wall[i]) if wall is not None else None), float(values[i])
 
 

@@ -113,7 +113,7 @@ def test_failures_are_logged_once_and_never_raise(tmp_path: Path, caplog: pytest
     def boom(*args: object, **kwargs: object) -> None:
         raise RuntimeError("disk on fire")
 
-    rec._rec.send_columns = boom  # type: ignore[method-assign]
+    rec._rec.send_record_batch = boom  # type: ignore[method-assign]
     with caplog.at_level(logging.ERROR, logger="monitor.service.recorder"):
         for s in samples:
             rec.submit(s)
@@ -175,3 +175,17 @@ def test_sigterm_mid_run_leaves_a_complete_recording(tmp_path: Path) -> None:
     got = recording.vehicles[7]
     assert len(got.samples) == sent >= 300 and len(got.truth) == sent
     assert [r.k for r in got.samples] == list(range(sent))
+
+
+def test_numpy_fields_from_the_estimator_are_accepted(tmp_path: Path) -> None:
+    """The loop may hand over ``StepResult`` arrays and numpy scalars as they are."""
+    import numpy as np
+
+    path = tmp_path / "np.rrd"
+    samples, _ = make_run(4, n=10)
+    with RrdRecorder(path) as rec:
+        for s in samples:
+            rec.submit(dataclasses.replace(s, x_hat=np.array(s.x_hat), f_hat=np.array(s.f_hat), u=np.array(s.u),
+                                           residual=np.array(s.residual), alpha=np.float64(s.alpha), alarm=np.bool_(s.alarm)))
+    for got, want in zip(load_recording(path).vehicles[4].samples, samples):
+        assert_same(got, want)

@@ -4,11 +4,15 @@ Why this shape: ``RecordingStream.log`` costs 50-90 us per call, far too much fo
 each vehicle within a sample, while ``send_columns`` costs about 2 us per scalar when many rows go in
 one call. So ``submit`` only appends the record to an in-memory deque (lock-free under the GIL, well
 under a microsecond, and safe to call from a signal handler's thread), and a background writer thread
-turns the pending records into columns and ships them with ``send_columns``:
+turns the pending records into one Arrow batch per vehicle and ships it with ``send_record_batch``
+(one call per vehicle and flush; Rerun splits it into per-entity chunks):
 
 * flush policy: the writer polls every ``poll_s`` (10 ms) and writes everything pending as soon as
-  ``batch_size`` (64) records are waiting or the oldest one has waited ``max_age_s`` (0.5 s), so the
-  file lags the loop by at most ~0.5 s and batches grow by themselves when the rate is high;
+  ``batch_size`` (256) records per vehicle seen are waiting or the oldest one has waited ``max_age_s``
+  (0.5 s), so the file lags the loop by at most ~0.5 s. Per vehicle because each flush costs about
+  1 ms of fixed Rerun work per vehicle: small batches over many vehicles would spend the GIL on it;
+  batches grow by themselves when the writer is busy (it takes everything pending). Between vehicles
+  the writer yields the GIL (``sleep(0)``) so the loop never waits behind a whole flush;
 * never drop: the deque is unbounded. If the writer falls behind (it has ~50x headroom: see
   ``benchmarks/bench_recorder.py``), memory grows until it catches up; nothing is discarded.
   ``close()`` writes whatever is left;
@@ -45,11 +49,13 @@ from __future__ import annotations
 import atexit
 import collections
 import logging
+import operator
 import platform
 import threading
 import time
 import weakref
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from typing import Any
 from importlib import metadata
 from pathlib import Path
 
@@ -93,6 +99,8 @@ SAMPLE_VECTORS: dict[str, str] = {
 }
 TRUTH_SCALARS: dict[str, tuple[str, float]] = {"tau": ("truth/tau", 1.0)}
 TRUTH_VECTORS: dict[str, str] = {"x": "truth/x", "f": "truth/f", "d": "truth/d"}
+
+TIMELINES = ("sample", "time", "wall_time")
 
 _DISTRIBUTIONS = {
     "fault_monitor_version": "uav-fault-monitor",
@@ -145,20 +153,73 @@ def default_blueprint(sysids: Iterable[int]):  # -> rerun.blueprint.Blueprint
 
 def _columns(records: Sequence[object], scalars: dict[str, tuple[str, float]],
              vectors: dict[str, str]) -> Iterator[tuple[str, np.ndarray, np.ndarray]]:
-    """Yield ``(relative path, row mask, values)`` per scalar entity; a ``None`` field leaves its row out."""
+    """Yield ``(relative path, row mask, values)`` per scalar entity; a ``None`` field leaves its row out.
+
+    The common case (no ``None``, vectors of one width) goes through one ``np.array`` call per field:
+    this runs in the writer thread but holds the GIL, so its cost is taken from the loop.
+    """
     n = len(records)
+    everyone = np.ones(n, bool)
+    names = [*scalars, *vectors]
+    fields = dict(zip(names, zip(*map(operator.attrgetter(*names), records)))) if n else dict.fromkeys(names, ())
     for field, (path, scale) in scalars.items():
-        raw = [getattr(r, field) for r in records]
+        raw = fields[field]
+        if None not in raw:
+            yield path, everyone, np.array(raw, dtype=float) * scale
+            continue
         mask = np.fromiter((v is not None for v in raw), bool, n)
         values = np.fromiter((float(v) * scale if v is not None else 0.0 for v in raw), float, n)
         yield path, mask, values
     for field, path in vectors.items():
-        raw = [getattr(r, field) for r in records]
-        width = max((len(v) for v in raw), default=0)
-        for i in range(width):
+        raw = fields[field]
+        widths = set(map(len, raw))
+        if len(widths) == 1:
+            table = np.array(raw, dtype=float).reshape(n, -1)
+            for i in range(table.shape[1]):
+                yield f"{path}/{i}", everyone, table[:, i]
+            continue
+        for i in range(max(widths, default=0)):
             mask = np.fromiter((len(v) > i for v in raw), bool, n)
             values = np.fromiter((float(v[i]) if len(v) > i else 0.0 for v in raw), float, n)
             yield f"{path}/{i}", mask, values
+
+
+def _scalar_field(entity: str) -> Any:
+    import pyarrow as pa
+
+    return pa.field(f"{entity}:Scalars:scalars", pa.list_(pa.float64()), metadata={
+        "rerun:kind": "data", "rerun:entity_path": entity, "rerun:archetype": "rerun.archetypes.Scalars",
+        "rerun:component": "Scalars:scalars", "rerun:component_type": "rerun.components.Scalar"})
+
+
+def _record_batch(sysid: int, records: Sequence[SampleRecord | TruthRecord], scalars: dict[str, tuple[str, float]],
+                  vectors: dict[str, str], wall: bool) -> Any:  # -> pyarrow.RecordBatch
+    """One vehicle's pending rows as ONE Arrow batch: every scalar entity is a column, the timelines shared.
+
+    Why not ``send_columns`` per entity: its fixed cost (~150-250 us a call, most of it building the
+    index and component columns in Python) times ~15 entities per vehicle would hold the GIL for
+    milliseconds per flush; ``send_record_batch`` splits one batch into per-entity chunks in Rust.
+    A ``None`` field is a null row, which Rerun stores as "not logged at this sample".
+    """
+    import pyarrow as pa
+
+    n = len(records)
+    k = np.array([r.k for r in records], dtype=np.int64)
+    t_ns = np.round(np.array([r.t for r in records], dtype=float) * 1e9).astype(np.int64)
+    arrays = [pa.array(k), pa.array(t_ns, pa.duration("ns"))]
+    fields = [pa.field("sample", pa.int64()), pa.field("time", pa.duration("ns"))]
+    if wall:
+        w_ns = np.round(np.array([r.wall for r in records], dtype=float) * 1e9).astype(np.int64)
+        arrays.append(pa.array(w_ns, pa.timestamp("ns")))
+        fields.append(pa.field("wall_time", pa.timestamp("ns")))
+    offsets = pa.array(np.arange(n + 1, dtype=np.int32))
+    for path, mask, values in _columns(records, scalars, vectors):
+        if not mask.any():
+            continue
+        nulls = None if mask.all() else pa.array(~mask)
+        arrays.append(pa.ListArray.from_arrays(offsets, pa.array(values, pa.float64()), mask=nulls))
+        fields.append(_scalar_field(f"/vehicle/{sysid}/{path}"))
+    return pa.RecordBatch.from_arrays(arrays, schema=pa.schema(fields))
 
 
 def _by_sysid(records: Iterable[SampleRecord | TruthRecord]) -> dict[int, list]:
@@ -178,7 +239,7 @@ class RrdRecorder:
     """
 
     def __init__(self, path: str | Path, application_id: str = "fault-monitor",
-                 properties: dict[str, str] | None = None, *, batch_size: int = 64, max_age_s: float = 0.5,
+                 properties: dict[str, str] | None = None, *, batch_size: int = 256, max_age_s: float = 0.5,
                  poll_s: float = 0.01, recording_name: str | None = None) -> None:
         import rerun as rr
 
@@ -234,7 +295,7 @@ class RrdRecorder:
     # -- the writer's side ------------------------------------------------------------------------------
 
     def _due(self) -> bool:
-        if len(self._pending) >= self.batch_size:
+        if len(self._pending) >= self.batch_size * max(1, len(self._sysids)):
             return True
         oldest = self._oldest
         return bool(self._pending) and oldest is not None and time.monotonic() - oldest >= self.max_age_s
@@ -266,25 +327,12 @@ class RrdRecorder:
             self.stats["written" if ok else "failed"] += len(recs)
             if ok:
                 self._sysids.add(sysid)
+            time.sleep(0)  # let the loop thread take the GIL between vehicles
 
     def _write_vehicle(self, sysid: int, recs: list, scalars: dict[str, tuple[str, float]],
                        vectors: dict[str, str], wall: bool) -> None:
-        rr = self._rr
-        n = len(recs)
-        k = np.fromiter((r.k for r in recs), np.int64, n)
-        t = np.fromiter((r.t for r in recs), float, n)
-        w = np.fromiter((r.wall for r in recs), float, n) if wall else None
-        for path, mask, values in _columns(recs, scalars, vectors):
-            if not mask.any():
-                continue
-            full = bool(mask.all())
-            index = [rr.TimeColumn("sample", sequence=k if full else k[mask]),
-                     rr.TimeColumn("time", duration=t if full else t[mask])]
-            if w is not None:
-                index.append(rr.TimeColumn("wall_time", timestamp=w if full else w[mask]))
-            self._rec.send_columns(f"/vehicle/{sysid}/{path}", indexes=index,
-                                   columns=rr.Scalars.columns(scalars=values if full else values[mask]),
-                                   strict=True)
+        batch = _record_batch(sysid, recs, scalars, vectors, wall)
+        self._rec.send_record_batch(batch, index=[name for name in TIMELINES if name in batch.schema.names])
 
     def _send_blueprint(self) -> None:
         ids = frozenset(self._sysids)
