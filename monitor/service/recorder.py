@@ -49,6 +49,7 @@ from __future__ import annotations
 import atexit
 import collections
 import logging
+import math
 import operator
 import platform
 import threading
@@ -101,6 +102,7 @@ TRUTH_SCALARS: dict[str, tuple[str, float]] = {"tau": ("truth/tau", 1.0)}
 TRUTH_VECTORS: dict[str, str] = {"x": "truth/x", "f": "truth/f", "d": "truth/d"}
 
 TIMELINES = ("sample", "time", "wall_time")
+BLUEPRINT_EVERY_S = 10.0
 
 _DISTRIBUTIONS = {
     "fault_monitor_version": "uav-fault-monitor",
@@ -252,6 +254,7 @@ class RrdRecorder:
         self._oldest: float | None = None  # monotonic time of the oldest pending record (approximate)
         self._sysids: set[int] = set()
         self._blueprint_ids: frozenset[int] = frozenset()
+        self._blueprint_at = -math.inf  # monotonic time of the last blueprint sent
         self._failures: set[str] = set()
         self._stop = threading.Event()
         self._closed = False
@@ -307,18 +310,15 @@ class RrdRecorder:
 
     def _drain(self) -> None:
         """Take everything pending (other threads may keep appending) and write it, never raising."""
-        batch = []
         self._oldest = time.monotonic()
-        while self._pending:
-            batch.append(self._pending.popleft())
+        batch = [self._pending.popleft() for _ in range(len(self._pending))]  # a snapshot: producers go on
         if not batch:
             return
         samples = [r for r in batch if isinstance(r, SampleRecord)]
         truths = [r for r in batch if isinstance(r, TruthRecord)]
         self._write(samples, SAMPLE_SCALARS, SAMPLE_VECTORS, wall=True)
         self._write(truths, TRUTH_SCALARS, TRUTH_VECTORS, wall=False)
-        if self._sysids != self._blueprint_ids:
-            self._guard("blueprint", lambda: self._send_blueprint())
+        self._update_blueprint(force=False)
 
     def _write(self, records: list, scalars: dict[str, tuple[str, float]], vectors: dict[str, str],
                wall: bool) -> None:
@@ -334,10 +334,17 @@ class RrdRecorder:
         batch = _record_batch(sysid, recs, scalars, vectors, wall)
         self._rec.send_record_batch(batch, index=[name for name in TIMELINES if name in batch.schema.names])
 
-    def _send_blueprint(self) -> None:
+    def _update_blueprint(self, force: bool) -> None:
+        """Re-send the default layout when vehicles joined: at once for the first, then at most every
+        ``BLUEPRINT_EVERY_S`` (each copy stays in the file) and at ``close()``."""
         ids = frozenset(self._sysids)
-        self._rec.send_blueprint(default_blueprint(ids), make_active=True, make_default=True)
-        self._blueprint_ids = ids
+        if ids == self._blueprint_ids:
+            return
+        if not force and self._blueprint_ids and time.monotonic() - self._blueprint_at < BLUEPRINT_EVERY_S:
+            return
+        if self._guard("blueprint", lambda: self._rec.send_blueprint(default_blueprint(ids), make_active=True,
+                                                                      make_default=True)):
+            self._blueprint_ids, self._blueprint_at = ids, time.monotonic()
 
     def _guard(self, kind: str, fn: Callable[[], None]) -> bool:
         """Run ``fn``; on failure log one line per kind (not per batch) and report False."""
@@ -369,6 +376,7 @@ class RrdRecorder:
             if self._thread.is_alive():
                 self._fail_once("close", f"writer thread still busy after {timeout_s} s")
             self._drain()
+            self._update_blueprint(force=True)
             self._guard("close", self._finish)
         finally:
             self._close_lock.release()
