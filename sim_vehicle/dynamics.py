@@ -72,7 +72,10 @@ class Airframe:
         self.effectiveness = float(effectiveness)
         if stuck and not self.stuck and stuck_value is not None:
             self.position = float(stuck_value)
+        released = self.stuck and not stuck
         self.stuck = stuck
+        if released and self.actuator.rate_limit is None:
+            self.position = self.target  # a freed servo goes to its current command (slews if rate-limited)
 
     def command(self, u: float) -> None:
         """A command reaches the actuator now: clip it and move (or start slewing) the surface."""

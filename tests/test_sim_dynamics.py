@@ -113,6 +113,7 @@ def test_stuck_freezes_the_surface_where_it_is_or_at_a_value():
     ref = brute([0, 0], [(0, 1.0, lambda t: 2.0)])
     assert np.allclose(air.x, ref, atol=1e-10)
     air.set_interval([0.0], [0.0], stuck=False)
+    assert air.position == -10.0  # released: the servo goes to the command it kept receiving
     air.command(-1.0)
     assert air.position == -1.0
     air.set_interval([0.0], [0.0], stuck=True, stuck_value=5.0)

@@ -34,6 +34,17 @@ def vehicle(tmp_path, port: int, *args: str, name: str = "vehicle") -> Daemon:
     return Daemon("sim_vehicle", ["run", "--mavlink", f"udpout:127.0.0.1:{port}", *args], tmp_path / f"{name}.log")
 
 
+def datagrams(d: Daemon, rx: socket.socket, timeout: float = 30.0):
+    """Yield ``(datagram, source)`` reaching ``rx`` until the daemon exits (bounded by ``timeout``)."""
+    rx.settimeout(0.2)
+    deadline = time.monotonic() + timeout
+    while d.proc.poll() is None and time.monotonic() < deadline:
+        try:
+            yield rx.recvfrom(4096)
+        except socket.timeout:
+            continue
+
+
 def read_jsonl(path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines()]
 
@@ -126,7 +137,6 @@ def test_garbage_and_unsigned_commands_are_counted_and_signed_ones_applied(tmp_p
     port, bind = free_udp_port(), free_udp_port()
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", port))
-    rx.settimeout(0.2)
     good, unsigned, forger = new_codec(255, MONITOR_COMPONENT), new_codec(255, MONITOR_COMPONENT), new_codec(
         255, MONITOR_COMPONENT)
     enable_signing(good, key)
@@ -138,12 +148,7 @@ def test_garbage_and_unsigned_commands_are_counted_and_signed_ones_applied(tmp_p
     try:
         with vehicle(tmp_path, port, "--steps", "20", "--speedup", "10", "--no-zenoh", "--bind", f"127.0.0.1:{bind}",
                      "--signing-key", str(tmp_path / "key.hex"), "--summary-json", str(tmp_path / "s.json")) as d:
-            deadline = time.monotonic() + 30
-            while d.proc.poll() is None and time.monotonic() < deadline:
-                try:
-                    data, _ = rx.recvfrom(4096)
-                except socket.timeout:
-                    continue
+            for data, _ in datagrams(d, rx):
                 msgs = verifier.parse_buffer(data) or []
                 assert msgs and all(m.get_type() != "BAD_DATA" for m in msgs)  # the vehicle signs its frames
                 for m in msgs:
@@ -188,3 +193,41 @@ def test_help_and_config_file(tmp_path):
                 tmp_path / "conf.log") as d:
         assert d.wait(20) == 0, d.log()
     assert json.loads((tmp_path / "s.json").read_text())["samples"]["taken"] == 3
+
+
+def test_emulated_loss_duplication_and_reordering_follow_the_seeded_draws(tmp_path):
+    from sim_vehicle.network import DOWNLINK, UPLINK, Impairment
+
+    steps, seed = 60, 11
+    imp = Impairment(loss=0.2, duplicate=0.2, reorder=0.1, seed=seed)
+    port = free_udp_port()
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", port))
+    mav, parser = new_codec(255, MONITOR_COMPONENT), new_codec(255, MONITOR_COMPONENT)
+    answered: set[int] = set()
+    arrivals: list[int] = []
+    try:
+        with vehicle(tmp_path, port, "--steps", str(steps), "--speedup", "10", "--no-zenoh", "--seed", str(seed),
+                     "--loss", "0.2", "--duplicate", "0.2", "--reorder", "0.1",
+                     "--summary-json", str(tmp_path / "s.json")) as d:
+            for data, src in datagrams(d, rx):
+                for m in parser.parse_buffer(data) or []:
+                    if m.get_type() == "AOA_SSA":
+                        k = sample_index(m.time_usec, 1.0)
+                        arrivals.append(k)
+                        if k not in answered:  # answer each sample once, so each command is copy 0
+                            answered.add(k)
+                            rx.sendto(encode_command(mav, Command(1, k, 0.0), 1.0), src)
+            assert d.wait(15) == 0, d.log()
+    finally:
+        rx.close()
+    s = json.loads((tmp_path / "s.json").read_text())
+    fates = [imp.fate(UPLINK, k) for k in range(steps)]
+    assert s["samples"]["dropped"] == sum(not f for f in fates)
+    assert s["samples"]["duplicated"] == sum(len(f) == 2 for f in fates)
+    assert s["samples"]["reordered"] == sum(bool(f) and f[0][1] == "reordered" for f in fates)
+    delivered = {k for k, f in enumerate(fates) if f}
+    assert {k for k in delivered if k < steps - 2} <= set(arrivals) <= delivered  # late copies may outlive the run
+    assert arrivals != sorted(arrivals)  # reordering is visible on the wire
+    assert s["commands"]["dropped"] == sum(not imp.fate(DOWNLINK, k, 0) for k in answered)
+    assert s["samples"]["applied"] + s["samples"]["late"] + s["samples"]["lost"] == steps
