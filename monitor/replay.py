@@ -13,10 +13,10 @@ component (the elevator fault).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import warnings
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -143,41 +143,79 @@ def _properties(chunk: Any) -> dict[str, str]:
     return out
 
 
-def _rows(chunk: Any) -> Iterator[tuple[int, float, float | None, float]]:
-    """(k, t, wall or None, value) per row of a scalar chunk."""
+@dataclass
+class _Column:
+    """One chunk of one scalar entity: which record field it fills, and its rows."""
+
+    field: str
+    index: int | None  # component of a vector field, None for a scalar field
+    k: np.ndarray
+    t: np.ndarray
+    wall: np.ndarray | None
+    values: np.ndarray  # already divided by the recorder's scale
+
+
+def _column(chunk: Any, field: str, index: int | None, scale: float) -> _Column | None:
     batch = chunk.to_record_batch()
     names = batch.schema.names
     if "sample" not in names or "Scalars:scalars" not in names:
-        return
-    k = batch.column("sample").to_numpy(zero_copy_only=False)
-    t = _seconds(batch.column("time")) if "time" in names else np.full(len(k), math.nan)
-    wall = _seconds(batch.column("wall_time")) if "wall_time" in names else None
+        return None
     present, values = _scalars(batch.column("Scalars:scalars"))
-    for i in np.flatnonzero(present):
-        yield int(k[i]), float(t[i]), (float(wall[i]) if wall is not None else None), float(values[i])
+    k = batch.column("sample").to_numpy(zero_copy_only=False).astype(np.int64)[present]
+    t = _seconds(batch.column("time"))[present] if "time" in names else np.full(k.size, math.nan)
+    wall = _seconds(batch.column("wall_time"))[present] if "wall_time" in names else None
+    return _Column(field, index, k, t, wall, values[present] / scale)
 
 
-def _vector(cells: dict[int, float]) -> list[float]:
-    return [cells.get(i, math.nan) for i in range(max(cells) + 1)] if cells else []
+_OPTIONAL = {"elevator", "tau_obs", "tau"}  # None when not recorded; other missing scalars read as NaN
 
 
-def _build_sample(sysid: int, k: int, cell: dict[str, Any]) -> SampleRecord:
-    def vec(name: str) -> list[float]:
-        return _vector(cell.get(name, {}))
+def _assemble(cls: type, sysid: int, columns: list[_Column]) -> list[Any]:
+    """Align every column of one vehicle on the union of its k and build one ``cls`` record per k."""
+    ks = np.unique(np.concatenate([c.k for c in columns]))
+    n = ks.size
+    per_row: dict[str, list[Any]] = {"sysid": [sysid] * n, "k": ks.tolist()}
+    t, wall = np.full(n, math.nan), np.full(n, math.nan)
+    scalars: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    vectors: dict[str, dict[int, np.ndarray]] = {}
+    for c in columns:
+        pos = np.searchsorted(ks, c.k)
+        t[pos] = c.t
+        if c.wall is not None:
+            wall[pos] = c.wall
+        if c.index is None:
+            values, has = scalars.setdefault(c.field, (np.full(n, math.nan), np.zeros(n, bool)))
+            values[pos], has[pos] = c.values, True
+        else:
+            vectors.setdefault(c.field, {}).setdefault(c.index, np.full(n, math.nan))[pos] = c.values
+    per_row.update(t=t.tolist(), wall=wall.tolist())
+    for name, (values, has) in scalars.items():
+        if name == "alarm":
+            per_row[name] = (has & (values >= 0.5)).tolist()
+        elif name in _OPTIONAL:
+            per_row[name] = [v if h else None for v, h in zip(values.tolist(), has.tolist())]
+        else:
+            per_row[name] = values.tolist()
+    for name, comps in vectors.items():
+        width = max(comps) + 1
+        table = np.full((n, width), math.nan)
+        for i, values in comps.items():
+            table[:, i] = values
+        per_row[name] = table.tolist()
+    order = [f.name for f in dataclasses.fields(cls)]
+    for name in order:
+        if name not in per_row:
+            per_row[name] = _absent(name, n)
+    return [cls(*row) for row in zip(*(per_row[name] for name in order))]
 
-    nan = math.nan
-    return SampleRecord(
-        sysid=sysid, k=k, t=cell.get("t", nan), wall=cell.get("wall", nan), y=vec("y"),
-        alpha=cell.get("alpha", nan), q=cell.get("q", nan), elevator=cell.get("elevator"),
-        x_hat=vec("x_hat"), f_hat=vec("f_hat"), u=vec("u"), residual=vec("residual"),
-        tau_obs=cell.get("tau_obs"), processing_s=cell.get("processing_s", nan),
-        alarm=bool(cell.get("alarm", 0.0) >= 0.5),
-    )
 
-
-def _build_truth(sysid: int, k: int, cell: dict[str, Any]) -> TruthRecord:
-    return TruthRecord(sysid=sysid, k=k, t=cell.get("t", math.nan), x=_vector(cell.get("x", {})),
-                       f=_vector(cell.get("f", {})), d=_vector(cell.get("d", {})), tau=cell.get("tau"))
+def _absent(name: str, n: int) -> list[Any]:
+    """The per-row value of a field that has no entity at all in the file (e.g. never measured)."""
+    if name in _OPTIONAL:
+        return [None] * n
+    if name in SAMPLE_VECTORS or name in TRUTH_VECTORS:
+        return [[] for _ in range(n)]
+    return [False] * n if name == "alarm" else [math.nan] * n
 
 
 def load_recording(path: str | Path) -> Recording:
@@ -185,8 +223,7 @@ def load_recording(path: str | Path) -> Recording:
     path = Path(path)
     store, chunks, has_footer = _read_chunks(path)
     properties: dict[str, str] = {}
-    # (kind, sysid) -> k -> field -> value (a dict index -> value for vector fields)
-    cells: dict[tuple[str, int], dict[int, dict[str, Any]]] = {}
+    columns: dict[tuple[str, int], list[_Column]] = {}
     for chunk in chunks:
         entity = chunk.entity_path
         if chunk.is_static:
@@ -195,30 +232,18 @@ def load_recording(path: str | Path) -> Recording:
             continue
         match = _VEHICLE_RE.match(entity)
         where = _locate(match.group(2)) if match else None
-        if where is None:
-            continue
-        kind, name, index, scale = where
-        table = cells.setdefault((kind, int(match.group(1))), {})
-        for k, t, wall, value in _rows(chunk):
-            cell = table.setdefault(k, {})
-            cell["t"] = t
-            if wall is not None:
-                cell["wall"] = wall
-            if index is None:
-                cell[name] = value / scale
-            else:
-                cell.setdefault(name, {})[index] = value
-    if not cells and not properties:
+        column = _column(chunk, *where[1:]) if where else None
+        if column is not None and column.k.size:
+            columns.setdefault((where[0], int(match.group(1))), []).append(column)
+    if not columns and not properties:
         raise UserError(f"{path}: a Rerun recording, but not one written by fault-monitor (no /vehicle/ data)")
     vehicles: dict[int, VehicleSeries] = {}
-    for (kind, sysid), table in sorted(cells.items()):
+    for (kind, sysid), cols in sorted(columns.items()):
         series = vehicles.setdefault(sysid, VehicleSeries(sysid))
-        build = _build_sample if kind == "sample" else _build_truth
-        rows = [build(sysid, k, table[k]) for k in sorted(table)]
         if kind == "sample":
-            series.samples = rows
+            series.samples = _assemble(SampleRecord, sysid, cols)
         else:
-            series.truth = rows
+            series.truth = _assemble(TruthRecord, sysid, cols)
     return Recording(path, store.application_id, properties, dict(sorted(vehicles.items())), has_footer)
 
 
