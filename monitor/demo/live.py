@@ -1,7 +1,7 @@
 """One live run of the paper scenario: real `sim-vehicle` and `fault-monitor run` daemons on loopback.
 
-The demo's own process is the Zenoh meeting point: it listens on a free loopback TCP port, both daemons
-connect to it (no router, no multicast), and it subscribes to the estimates and the ground truth to show
+The demo's own process is the Zenoh meeting point (a router session): it listens on a free loopback TCP port, both daemons
+connect to it as clients (no zenohd, no multicast), and it subscribes to the estimates and the ground truth to show
 progress. The scores come from the monitor's .rrd recording (the same code as `fault-monitor replay`),
 so what the table says can be recomputed from the files it leaves behind.
 
@@ -128,7 +128,9 @@ def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progre
                 into.append(payload)
         return on_sample
 
-    session = open_session(build_config(listen=[endpoint]))
+    # A router with both daemons as its clients: peers that only know a hub (gossip and multicast off) do not
+    # see each other's publications through it, clients of a router do (the monitor needs the truth stream).
+    session = open_session(build_config(listen=[endpoint], mode="router"))
     subs = [
         session.declare_subscriber(f"uav/{scenario.sysid}/fault/estimate", collect(run.estimates)),
         session.declare_subscriber(f"uav/{scenario.sysid}/truth", collect(run.truth)),
@@ -138,7 +140,7 @@ def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progre
     try:
         name = f"demo-{method}-{os.getpid()}"
         monitor = _Daemon("monitor", ["--log-level", "WARNING", "run", "--plant", scenario.plant, "--gains", str(gains),
-                                      "--mavlink", f"udpin:127.0.0.1:{uport}", "--zenoh-connect", endpoint,
+                                      "--mavlink", f"udpin:127.0.0.1:{uport}", "--zenoh-connect", endpoint, "--zenoh-mode", "client",
                                       "--rrd", str(run.rrd), "--name", name], run.log_dir / f"{method}-monitor.log")
         token = f"uav/monitor/{name}"
         _wait(lambda: any(True for _ in session.liveliness().get(token, timeout=0.2)), 60, f"monitor '{name}' on Zenoh",
@@ -148,7 +150,7 @@ def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progre
                                       "--sysid", str(scenario.sysid), "--steps", str(scenario.steps),
                                       "--speedup", str(scenario.speedup), "--fault", scenario.fault,
                                       "--delay", scenario.delay, "--wind", scenario.wind, "--seed", str(scenario.seed),
-                                      "--zenoh-connect", endpoint, "--log-level", "WARNING"],
+                                      "--zenoh-connect", endpoint, "--zenoh-mode", "client", "--log-level", "WARNING"],
                       run.log_dir / f"{method}-sim.log")
         budget = scenario.steps / scenario.speedup + 30.0
         deadline = time.monotonic() + budget
