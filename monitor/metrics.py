@@ -116,4 +116,5 @@ def percentiles(values: ArrayLike) -> dict[str, float] | None:
     if not v.size:
         return None
     p50, p99 = np.percentile(v, [50, 99])
-    return {"n": int(v.size), "mean": float(v.mean()), "p50": float(p50), "p99": float(p99), "max": float(v.max())}
+    return {"n": int(v.size), "mean": float(v.mean()), "p50": float(p50), "p99": float(p99),
+            "max": float(v.max())}

@@ -64,7 +64,8 @@ class Recording:
 def _layout() -> dict[str, tuple[str, str, int | None, float]]:
     """Relative entity path -> (kind, field, component index or None, scale), inverted from the recorder."""
     out: dict[str, tuple[str, str, int | None, float]] = {}
-    for kind, scalars, vectors in (("sample", SAMPLE_SCALARS, SAMPLE_VECTORS), ("truth", TRUTH_SCALARS, TRUTH_VECTORS)):
+    tables = (("sample", SAMPLE_SCALARS, SAMPLE_VECTORS), ("truth", TRUTH_SCALARS, TRUTH_VECTORS))
+    for kind, scalars, vectors in tables:
         for name, (path, scale) in scalars.items():
             out[path] = (kind, name, None, scale)
         for name, path in vectors.items():
@@ -125,7 +126,7 @@ def _read_chunks(path: Path) -> tuple[Any, list[Any], bool]:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         hint = ""
         if "exceeds file size" in first or "footer" in first:
-            hint = f" (truncated: the writer was killed? salvage with `rerun rrd optimize {path} -o FIXED.rrd`)"
+            hint = f" (truncated: writer killed? salvage with `rerun rrd optimize {path} -o FIXED.rrd`)"
         raise UserError(f"{path}: not a readable .rrd recording: {first}{hint}") from None
     has_footer = not any("no footer" in str(w.message) for w in caught)
     return stores[0], chunks, has_footer
@@ -236,7 +237,7 @@ def load_recording(path: str | Path) -> Recording:
         if column is not None and column.k.size:
             columns.setdefault((where[0], int(match.group(1))), []).append(column)
     if not columns and not properties:
-        raise UserError(f"{path}: a Rerun recording, but not one written by fault-monitor (no /vehicle/ data)")
+        raise UserError(f"{path}: a Rerun recording, but not written by fault-monitor (no /vehicle/ data)")
     vehicles: dict[int, VehicleSeries] = {}
     for (kind, sysid), cols in sorted(columns.items()):
         series = vehicles.setdefault(sysid, VehicleSeries(sysid))
@@ -307,7 +308,8 @@ def _times(value: int | None, h: float | None) -> float | None:
     return None if value is None or h is None else value * h
 
 
-def analyse_vehicle(series: VehicleSeries, fault_spec: str | None = None, tol: float = SETTLING_TOL) -> dict[str, Any]:
+def analyse_vehicle(series: VehicleSeries, fault_spec: str | None = None,
+                    tol: float = SETTLING_TOL) -> dict[str, Any]:
     """Every score of one vehicle, as a JSON-able dict (see ``fault-monitor replay --help`` for the keys)."""
     s = series.samples
     k = np.array([r.k for r in s], dtype=np.int64)
@@ -327,7 +329,8 @@ def analyse_vehicle(series: VehicleSeries, fault_spec: str | None = None, tol: f
     detected = metrics.first_alarm(k, alarm, start=onset) if onset is not None else None
     settling = None
     if fault and onset is not None and fault.size:
-        settling = metrics.settling_steps(k[known], f_hat[known], fault.f[known], onset, fault.size, tol, fault.stop)
+        settling = metrics.settling_steps(k[known], f_hat[known], fault.f[known], onset, fault.size, tol,
+                                          fault.stop)
     rms_ef = rms_ef_post = None
     if fault and known.any():
         rms_ef = metrics.rms_error(k[known], f_hat[known], fault.f[known])

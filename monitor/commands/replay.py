@@ -40,9 +40,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("file", metavar="FILE.rrd", help="recording written by `fault-monitor run --rrd`")
     parser.add_argument("--json", action="store_true", help="print the analysis as one JSON object")
-    parser.add_argument("--sysid", type=int, metavar="N", help="analyse only the vehicle with MAVLink system id N")
+    parser.add_argument("--sysid", type=int, metavar="N",
+                        help="analyse only the vehicle with MAVLink system id N")
     parser.add_argument("--fault", metavar="SPEC",
-                        help="the fault the vehicle ran with (bias:2@20, ramp:0.1@20, ...) when no truth was recorded")
+                        help="the fault the vehicle ran with (bias:2@20, ramp:0.1@20, ...), used when the "
+                             "recording holds no truth stream")
     parser.add_argument("--tol", type=float, default=0.05, metavar="FRAC",
                         help="settling band as a fraction of the fault size (default: 0.05)")
     parser.set_defaults(func=run)
@@ -84,7 +86,7 @@ def _vehicle_lines(v: dict[str, Any]) -> list[str]:
     elif v["fault_source"]:
         lines.append(f"  fault          none in {v['fault_source']}")
     else:
-        lines.append("  fault          unknown (no truth recorded; give --fault SPEC to score settling and e_f)")
+        lines.append("  fault          unknown (no truth recorded; --fault SPEC scores settling and e_f)")
     if v["first_alarm_k"] is None:
         alarm = "never raised"
     else:
@@ -97,7 +99,8 @@ def _vehicle_lines(v: dict[str, Any]) -> list[str]:
                   f"{v['settling_steps']} steps ({_num(v['settling_s'], ' s')}) after onset")
         lines.append(f"  settling       {settle} (band {v['settling_tol']:.0%} of the fault)")
     if v["rms_ef"] is not None:
-        lines.append(f"  rms e_f        {_num(v['rms_ef'])} (whole run), {_num(v['rms_ef_after_onset'])} after onset")
+        post = _num(v["rms_ef_after_onset"])
+        lines.append(f"  rms e_f        {_num(v['rms_ef'])} (whole run), {post} after onset")
     lines.append(f"  peak |alpha|   {_num(v['peak_alpha'], ' deg')} (rms {_num(v['rms_alpha'], ' deg')})")
     lines.append(f"  delay observed {_stats(v['tau_obs_s'], 1.0, ' s')}")
     if v["tau_true_s"]:
@@ -114,13 +117,13 @@ def format_report(report: dict[str, Any]) -> str:
               f"{len(report['sysids'])} vehicle(s))")
     lines = [header]
     if not report["complete"]:
-        lines.append("  note: the file has no footer (the writer did not close it); the rows present were read")
+        lines.append("  note: no footer (the writer did not close the file); the rows present were read")
     if not report["sysids"]:
         lines.append("no samples recorded")
     for v in report["vehicles"].values():
         lines.extend(_vehicle_lines(v))
     if len(report["sysids"]) > 1:
-        lines.append(f"fleet: {report['samples']} samples, worst settling {_num(report['settling_steps'])} steps, "
-                     f"worst rms e_f {_num(report['rms_ef'])}, peak |alpha| {_num(report['peak_alpha'], ' deg')}, "
-                     f"{report['false_alarms']} false alarm(s)")
+        lines.append(f"fleet: {report['samples']} samples, worst settling {_num(report['settling_steps'])} "
+                     f"steps, worst rms e_f {_num(report['rms_ef'])}, peak |alpha| "
+                     f"{_num(report['peak_alpha'], ' deg')}, {report['false_alarms']} false alarm(s)")
     return "\n".join(lines)

@@ -163,7 +163,8 @@ def _columns(records: Sequence[object], scalars: dict[str, tuple[str, float]],
     n = len(records)
     everyone = np.ones(n, bool)
     names = [*scalars, *vectors]
-    fields = dict(zip(names, zip(*map(operator.attrgetter(*names), records)))) if n else dict.fromkeys(names, ())
+    rows = map(operator.attrgetter(*names), records)
+    fields = dict(zip(names, zip(*rows))) if n else dict.fromkeys(names, ())
     for field, (path, scale) in scalars.items():
         raw = fields[field]
         if None not in raw:
@@ -194,9 +195,9 @@ def _scalar_field(entity: str) -> Any:
         "rerun:component": "Scalars:scalars", "rerun:component_type": "rerun.components.Scalar"})
 
 
-def _record_batch(sysid: int, records: Sequence[SampleRecord | TruthRecord], scalars: dict[str, tuple[str, float]],
-                  vectors: dict[str, str], wall: bool) -> Any:  # -> pyarrow.RecordBatch
-    """One vehicle's pending rows as ONE Arrow batch: every scalar entity is a column, the timelines shared.
+def _record_batch(sysid: int, records: Sequence[SampleRecord | TruthRecord],
+                  scalars: dict[str, tuple[str, float]], vectors: dict[str, str], wall: bool) -> Any:
+    """One vehicle's pending rows as ONE ``pyarrow.RecordBatch``: a column per scalar entity, shared timelines.
 
     Why not ``send_columns`` per entity: its fixed cost (~150-250 us a call, most of it building the
     index and component columns in Python) times ~15 entities per vehicle would hold the GIL for
