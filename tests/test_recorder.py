@@ -189,3 +189,23 @@ def test_numpy_fields_from_the_estimator_are_accepted(tmp_path: Path) -> None:
                                            residual=np.array(s.residual), alpha=np.float64(s.alpha), alarm=np.bool_(s.alarm)))
     for got, want in zip(load_recording(path).vehicles[4].samples, samples):
         assert_same(got, want)
+
+
+def test_recording_properties_describe_plant_and_gains(tmp_path: Path) -> None:
+    import json
+
+    import numpy as np
+
+    from monitor.closed_loop import Gains
+    from monitor.plant import load_plant
+    from monitor.service.recorder import recording_properties
+
+    plant = load_plant("paper")
+    gains = Gains(L=np.full((plant.n, plant.l), 0.5), M=np.full((plant.q, plant.l), 0.1),
+                  K1=np.zeros((plant.m, plant.l)), K2=np.zeros((plant.m, plant.m)), K3=np.zeros((plant.m, plant.q)))
+    props = recording_properties(plant, gains, "certified", "gains.toml")
+    path = tmp_path / "props.rrd"
+    RrdRecorder(path, properties=props).close()
+    got = load_recording(path).properties
+    assert got["plant_name"] == plant.name and got["plant_hash"] == plant.digest and got["gains_method"] == "certified"
+    assert np.allclose(json.loads(got["gains_L"]), gains.L)

@@ -100,3 +100,14 @@ def test_missing_foreign_and_unknown_vehicle_are_user_errors(capsys: pytest.Capt
     for argv in ([str(tmp_path / "missing.rrd")], [str(foreign)], [str(fleet), "--sysid", "9"]):
         code, _, err = replay(capsys, *argv)
         assert code == 2 and len(err.strip().splitlines()) == 1, (argv, err)
+
+
+def test_empty_recording_reports_zero_samples(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    from monitor.service.recorder import RrdRecorder
+
+    path = tmp_path / "empty.rrd"
+    RrdRecorder(path).close()  # a monitor that never heard from a vehicle
+    code, out, _ = replay(capsys, str(path), "--json")
+    report = json.loads(out)
+    assert code == 0 and report["samples"] == 0 and report["sysids"] == [] and report["settling_steps"] is None
+    assert replay(capsys, str(path))[1].splitlines()[-1] == "no samples recorded"

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import atexit
 import collections
+import json
 import logging
 import math
 import operator
@@ -56,7 +57,7 @@ import threading
 import time
 import weakref
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from importlib import metadata
 from pathlib import Path
 
@@ -64,6 +65,10 @@ import numpy as np
 
 from monitor.errors import UserError
 from monitor.service.records import SampleRecord, TruthRecord
+
+if TYPE_CHECKING:
+    from monitor.closed_loop import Gains
+    from monitor.plant import Plant
 
 __all__ = [
     "RrdRecorder",
@@ -74,6 +79,7 @@ __all__ = [
     "TRUTH_SCALARS",
     "TRUTH_VECTORS",
     "software_versions",
+    "recording_properties",
     "default_blueprint",
 ]
 
@@ -122,6 +128,24 @@ def software_versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             out[key] = "not installed"
     return out
+
+
+def recording_properties(plant: Plant, gains: Gains, method: str,
+                         gains_source: str | None = None) -> dict[str, str]:
+    """The plant and gains a recording was made with, as recording properties (matrices as JSON rows).
+
+    For ``RrdRecorder(properties=...)``: a recording must say which model and gains produced its
+    estimates, or it cannot be re-scored or reproduced later.
+    """
+    props = {
+        "plant_name": plant.name, "plant_source": plant.source, "plant_hash": plant.digest,
+        "plant_h_s": repr(plant.h), "plant_tau_s": f"[{plant.tau_min!r}, {plant.tau_max!r}]",
+        "plant_unit": plant.unit,
+        "gains_method": method, "gains_source": gains_source or "",
+    }
+    for name in ("L", "M", "K1", "K2", "K3"):
+        props[f"gains_{name}"] = json.dumps(np.asarray(getattr(gains, name), dtype=float).tolist())
+    return props
 
 
 def default_blueprint(sysids: Iterable[int]):  # -> rerun.blueprint.Blueprint
@@ -197,7 +221,7 @@ def _scalar_field(entity: str) -> Any:
 
 def _record_batch(sysid: int, records: Sequence[SampleRecord | TruthRecord],
                   scalars: dict[str, tuple[str, float]], vectors: dict[str, str], wall: bool) -> Any:
-    """One vehicle's pending rows as ONE ``pyarrow.RecordBatch``: a column per scalar entity, shared timelines.
+    """One vehicle's pending rows as ONE ``pyarrow.RecordBatch``: a column per entity, shared timelines.
 
     Why not ``send_columns`` per entity: its fixed cost (~150-250 us a call, most of it building the
     index and component columns in Python) times ~15 entities per vehicle would hold the GIL for
