@@ -1,7 +1,8 @@
 """The paper's Figs. 3-5 for every design: f_hat against the true fault, angle of attack, pitch rate.
 
-Why fixed axis limits from the stable designs: a design that diverges would otherwise squash every other
-curve to a flat line; its curve is still drawn (clipped) and its legend entry says it left the plot.
+Why axis limits from the stable designs only: a design whose loop is unstable (it diverges, or oscillates
+at the actuator limit) would otherwise squash every other curve to a flat line; its curve is still drawn,
+clipped, and its legend entry says so.
 """
 
 from __future__ import annotations
@@ -28,8 +29,10 @@ def _limits(series: list[np.ndarray], floor: float) -> tuple[float, float]:
     return lo - pad, hi + pad
 
 
-def _panel(ax, runs: dict[str, Trace], field: str, onset: int | None, ylabel: str, title: str, truth: bool) -> None:
-    series = [getattr(t, field) for t in runs.values()]
+def _panel(ax, runs: dict[str, Trace], field: str, onset: int | None, ylabel: str, title: str, truth: bool,
+           unstable: frozenset[str]) -> None:
+    scaled = [getattr(t, field) for name, t in runs.items() if name not in unstable] or [getattr(t, field) for t in runs.values()]
+    series = list(scaled)
     if truth:
         first = next(iter(runs.values()))
         ax.step(first.k, first.f, where="post", color="black", lw=2.0, label="true fault f")
@@ -38,7 +41,7 @@ def _panel(ax, runs: dict[str, Trace], field: str, onset: int | None, ylabel: st
     for name, t in runs.items():
         y = getattr(t, field)
         left = bool(np.any(~np.isfinite(y)) or np.any((y < lo) | (y > hi)))
-        label = f"{name}{' (leaves the plot: diverges)' if left else ''}"
+        label = f"{name}{' (unstable loop: clipped)' if left else ''}"
         ax.plot(t.k, np.clip(y, lo, hi), marker=".", ms=3, lw=1.2, color=COLOURS.get(name), label=label)
     if onset is not None:
         ax.axvline(onset, color="grey", ls="--", lw=1)
@@ -51,7 +54,8 @@ def _panel(ax, runs: dict[str, Trace], field: str, onset: int | None, ylabel: st
     ax.legend(fontsize=8, loc="lower right")
 
 
-def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subtitle: str) -> list[Path]:
+def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subtitle: str,
+                  unstable: frozenset[str] = frozenset()) -> list[Path]:
     """Write fig3_fault_estimate.png, fig4_alpha.png, fig5_q.png and an overview; return their paths."""
     import matplotlib
 
@@ -66,7 +70,7 @@ def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subt
     paths = []
     for name, field, ylabel, title, truth in specs:
         fig, ax = plt.subplots(figsize=(8, 4.2), dpi=110)
-        _panel(ax, runs, field, onset, ylabel, f"{title}\n{subtitle}", truth)
+        _panel(ax, runs, field, onset, ylabel, f"{title}\n{subtitle}", truth, unstable)
         fig.tight_layout()
         path = out_dir / name
         fig.savefig(path)
@@ -74,7 +78,7 @@ def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subt
         paths.append(path)
     fig, axes = plt.subplots(3, 1, figsize=(8, 10), dpi=100, sharex=True)
     for ax, (_, field, ylabel, title, truth) in zip(axes, specs):
-        _panel(ax, runs, field, onset, ylabel, title, truth)
+        _panel(ax, runs, field, onset, ylabel, title, truth, unstable)
     fig.suptitle(subtitle, fontsize=9)
     fig.tight_layout()
     path = out_dir / "overview.png"

@@ -119,7 +119,8 @@ def run_demo(opt: DemoOptions) -> int:
     if opt.figures:
         from monitor.demo.figures import write_figures
 
-        figures = [str(p) for p in write_figures(traces, fault.onset, out, subtitle)]
+        unstable = frozenset(m for m, v in verdicts.items() if not v.stable)
+        figures = [str(p) for p in write_figures(traces, fault.onset, out, subtitle, unstable)]
     print(f"\nPaper scenario, live over MAVLink/UDP + Zenoh ({subtitle}; {opt.steps} samples at {opt.speedup:g}x)\n")
     print(format_table(rows))
     print(f"\nFE settling: samples after onset until |f_hat - f| <= 5 % of the fault for good; no design can settle "
