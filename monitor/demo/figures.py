@@ -42,7 +42,9 @@ def _panel(ax, runs: dict[str, Trace], field: str, onset: int | None, ylabel: st
         y = getattr(t, field)
         left = bool(np.any(~np.isfinite(y)) or np.any((y < lo) | (y > hi)))
         label = f"{name}{' (unstable loop: clipped)' if left else ''}"
-        ax.plot(t.k, np.clip(y, lo, hi), marker=".", ms=3, lw=1.2, color=COLOURS.get(name), label=label)
+        faint = name in unstable  # drawn underneath, so the stable designs stay readable
+        ax.plot(t.k, np.clip(y, lo, hi), marker="" if faint else ".", ms=3, lw=0.8 if faint else 1.4,
+                alpha=0.45 if faint else 1.0, zorder=1 if faint else 3, color=COLOURS.get(name), label=label)
     if onset is not None:
         ax.axvline(onset, color="grey", ls="--", lw=1)
         ax.annotate(f"fault onset k = {onset}", (onset, hi), xytext=(4, -14), textcoords="offset points", fontsize=8, color="grey")
