@@ -5,9 +5,11 @@ overshoots after one; a bare threshold would chatter. The alarm raises when max_
 or above ``threshold`` for ``samples`` consecutive samples, and clears when it has been below
 ``clear`` for as many. Pure (no clock, no I/O), so the tests drive it with numbers.
 
-Defaults (plant units, degrees for the paper's plant), measured against the real ``sim-vehicle`` in
-the paper's scenario (see tests/e2e/test_monitor_paper.py and the report in monitor/service/SUBSCRIBE.md):
-a 2 deg bias at k = 20 raises at k = 22 or 23, and no seed tried raised before onset.
+Defaults (plant units, degrees for the paper's plant: threshold 1.0, clear 0.5, 2 samples), measured
+against the real ``sim-vehicle`` in the paper's scenario (bias 2 deg at k = 20, paper wind, delay
+uniform over [0, 0.46] s; seeds 0, 1, 2, 3, 5): before onset max |f_hat| stays below 0.01 deg (no false
+alarm); f_hat first moves at k = 22 (2.95 deg, the observer's overshoot) and the alarm raises at k = 23,
+three samples after onset and one after the earliest possible (tests/e2e/test_monitor_paper.py checks it).
 """
 
 from __future__ import annotations
