@@ -12,13 +12,12 @@ timestamps are restored after any rejected frame, keeping only those of frames t
 
 from __future__ import annotations
 
-import hashlib
 import logging
 from collections import Counter
 from dataclasses import dataclass
-from pathlib import Path
 
 from monitor.errors import UserError
+from monitor.wire.signing_key import load_signing_key  # shared with the monitor: one key-file format
 from monitor.wire.mavlink import (
     VEHICLE_COMPONENT,
     bump_signing_clock,
@@ -32,31 +31,6 @@ from monitor.wire.mavlink import (
 __all__ = ["ReceivedCommand", "CommandDecoder", "load_signing_key"]
 
 log = logging.getLogger(__name__)
-
-
-def load_signing_key(path: str | Path) -> bytes:
-    """Read a MAVLink 2 signing key: 32 raw bytes, 64 hex digits, or a passphrase (SHA-256 of it).
-
-    A passphrase is hashed like MAVProxy's ``signing setup PASSPHRASE``, so the same text works there.
-    """
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        raise UserError(f"--signing-key {path}: cannot read: {exc.strerror}") from None
-    if len(raw) == 32:
-        return raw
-    try:
-        text = raw.decode("utf-8").strip()
-    except UnicodeDecodeError:
-        raise UserError(f"--signing-key {path}: expected 32 raw bytes, 64 hex digits or a text passphrase") from None
-    if not text:
-        raise UserError(f"--signing-key {path}: the file is empty")
-    if len(text) == 64:
-        try:
-            return bytes.fromhex(text)
-        except ValueError:
-            pass
-    return hashlib.sha256(text.encode("utf-8")).digest()
 
 
 @dataclass(frozen=True)

@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     fleet = load_fleet(args.fleet, default, args.force) if args.fleet else Fleet(default)
     key = None
     if args.signing_key:
-        from sim_vehicle.link import load_signing_key  # one key-file format for both ends
+        from monitor.wire.signing_key import load_signing_key  # one key-file format for both ends
 
         key = load_signing_key(args.signing_key)
     properties = {"monitor_version": __version__, "mavlink": args.mavlink, "key_prefix": args.key_prefix,
