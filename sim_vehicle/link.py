@@ -16,7 +16,6 @@ import logging
 from collections import Counter
 from dataclasses import dataclass
 
-from monitor.errors import UserError
 from monitor.wire.signing_key import load_signing_key  # shared with the monitor: one key-file format
 from monitor.wire.mavlink import (
     VEHICLE_COMPONENT,

@@ -123,8 +123,8 @@ def run_demo(opt: DemoOptions) -> int:
         figures = [str(p) for p in write_figures(traces, fault.onset, out, subtitle, unstable)]
     print(f"\nPaper scenario, live over MAVLink/UDP + Zenoh ({subtitle}; {opt.steps} samples at {opt.speedup:g}x)\n")
     print(format_table(rows))
-    print(f"\nFE settling: samples after onset until |f_hat - f| <= 5 % of the fault for good; no design can settle "
-          f"before 2 (paper-findings). Alarm delay in samples after onset.")
+    print("\nFE settling: samples after onset until |f_hat - f| <= 5 % of the fault for good; no design can settle "
+          "before 2 (paper-findings). Alarm delay in samples after onset.")
     print(f"Recordings: {', '.join(r['rrd'] for r in runs.values())}  (rerun FILE.rrd | fault-monitor replay FILE.rrd)")
     if figures:
         print(f"Figures:    {', '.join(figures)}")

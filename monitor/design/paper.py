@@ -39,7 +39,6 @@ def design_paper(plant: Plant, weight_y: float = 0.1, **_ignored) -> DesignResul
     A, B0, C, Df, Dd = plant.A, plant.B0, plant.C, plant.Df, plant.Dd
     n, m, l, q, p = plant.n, plant.m, plant.l, plant.q, plant.p
     N = 2 * n + q
-    nw = p + n + q  # REPAIR: d_tau lives in R^n (D = I), so Psi's middle block is -gamma^2 I_n, not I_m
     # REPAIR: full symmetric P and Q (t = 1, 2, 3 blocks coupled). Block-diagonal P_t with block-diagonal G
     # makes (16) exactly zero along an e_f-only direction, so the printed Theorem 1 is never feasible.
     P = cp.Variable((N, N), symmetric=True)
@@ -63,6 +62,7 @@ def design_paper(plant: Plant, weight_y: float = 0.1, **_ignored) -> DesignResul
             [Z((n + q, n)), G23.T @ A_obs[:, :n] - Y @ C_obs[:, :n], G23.T @ A_obs[:, n:] - Y @ C_obs[:, n:]],
         ]
     )
+    # REPAIR: d_tau lives in R^n (D = I), so B_bar's middle column block is I_n and Psi's is -gamma^2 I_n, not I_m.
     B_bar = np.block([[Dd, np.eye(n), Z((n, q))], [Dd, np.eye(n), Z((n, q))], [Z((q, p)), Z((q, n)), np.eye(q)]])
     GB = G.T @ B_bar
     C_f = np.hstack([Z((q, 2 * n)), np.eye(q)])

@@ -50,7 +50,7 @@ def observer_alone(plant: Plant) -> tuple[np.ndarray, np.ndarray, float, str]:
 
 def _controller_loop(plant: Plant, K1: np.ndarray, K2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Nominal ``[x; u(k-1)]`` loop with ``u = K1 y + K2 u(k-1)`` (fault known and cancelled): A, B_d, C_y."""
-    n, m, p = plant.n, plant.m, plant.p
+    m, p = plant.m, plant.p
     A = np.block([[plant.A + plant.B0 @ K1 @ plant.C, plant.B0 @ K2 + plant.B1], [K1 @ plant.C, K2]])
     B = np.vstack([plant.Dd, np.zeros((m, p))])
     C = np.hstack([plant.C, np.zeros((plant.l, m))])
