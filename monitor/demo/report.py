@@ -86,8 +86,8 @@ def format_table(rows: list[Row]) -> str:
             f"FE settling (limit {SETTLING_LIMIT})", "RMS e_f after onset", "peak |alpha| after", "RMS alpha after",
             "alarm delay", "false alarms"]
     body = [[r.method, "stable" if r.stable else "UNSTABLE", r.certificate, _fmt(r.gamma_e), _fmt(r.gamma_z),
-             str(r.samples), _fmt(r.settling_steps, "d"), _fmt(r.rms_ef), _fmt(r.peak_alpha_after),
-             _fmt(r.rms_alpha_after), _fmt(r.alarm_delay, "d"), str(r.false_alarms)] for r in rows]
+             str(r.samples), _fmt(r.settling_steps, "d"), _fmt(r.rms_ef, ".3g"), _fmt(r.peak_alpha_after, ".3g"),
+             _fmt(r.rms_alpha_after, ".3g"), _fmt(r.alarm_delay, "d"), str(r.false_alarms)] for r in rows]
     widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
     line = lambda cells: "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()  # noqa: E731
     return "\n".join([line(head), line(["-" * w for w in widths]), *(line(b) for b in body)])
