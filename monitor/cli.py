@@ -13,7 +13,7 @@ import logging
 import sys
 
 from monitor import __version__
-from monitor.errors import UserError
+from monitor.errors import run_cli_command
 
 COMMANDS = ("design", "verify", "run", "subscribe", "replay", "demo")
 
@@ -51,13 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    try:
-        return int(args.func(args) or 0)
-    except UserError as exc:
-        print(f"fault-monitor {args.command}: error: {exc}", file=sys.stderr)
-        return exc.exit_code
-    except KeyboardInterrupt:
-        return 130
+    return run_cli_command("fault-monitor", args)
 
 
 if __name__ == "__main__":

@@ -17,3 +17,20 @@ class DesignFailed(UserError):
     """An LMI design that is infeasible or solved inaccurately. Exit code 3, and no gains file."""
 
     exit_code = 3
+
+
+def run_cli_command(prog: str, args) -> int:
+    """Run ``args.func(args)`` the way every command of this project reports errors.
+
+    A ``UserError`` is one line on stderr (``prog command: error: ...``) and its exit code, Ctrl-C is 130;
+    anything else is a bug and keeps its traceback.
+    """
+    import sys
+
+    try:
+        return int(args.func(args) or 0)
+    except UserError as exc:
+        print(f"{prog} {args.command}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        return 130

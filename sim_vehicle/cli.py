@@ -13,7 +13,7 @@ import json
 import logging
 import sys
 
-from monitor.errors import UserError
+from monitor.errors import UserError, run_cli_command
 from monitor.wire.zenoh_session import add_zenoh_arguments, close_quietly, config_from_args, key, open_session
 
 __all__ = ["build_parser", "main"]
@@ -163,10 +163,4 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     logging.basicConfig(level=getattr(logging, str(args.log_level).upper(), logging.INFO),
                         format="%(asctime)s %(name)s %(levelname)s %(message)s", stream=sys.stderr)
-    try:
-        return int(args.func(args) or 0)
-    except UserError as exc:
-        print(f"sim-vehicle {args.command}: error: {exc}", file=sys.stderr)
-        return exc.exit_code
-    except KeyboardInterrupt:
-        return 130
+    return run_cli_command("sim-vehicle", args)

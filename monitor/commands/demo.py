@@ -38,6 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from monitor.demo.live import Scenario
     from monitor.demo.orchestrate import DemoOptions, run_demo
     from monitor.errors import UserError
 
@@ -47,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--methods: unknown design '{(bad or [''])[0]}' (choose from {', '.join(METHODS)})")
     if args.steps < 2 or not args.speedup > 0 or (args.runs is not None and args.runs < 1):
         raise UserError("--steps must be >= 2, --speedup > 0 and --runs >= 1")
-    options = DemoOptions(out=args.out, plant=args.plant, steps=args.steps, speedup=args.speedup, fault=args.fault,
-                          delay=args.delay, wind=args.wind, seed=args.seed, methods=methods, runs=args.runs,
-                          redesign=args.redesign, figures=not args.no_figures)
+    scenario = Scenario(plant=args.plant, steps=args.steps, speedup=args.speedup, fault=args.fault, delay=args.delay,
+                        wind=args.wind, seed=args.seed)
+    options = DemoOptions(scenario=scenario, out=args.out, methods=methods, runs=args.runs, redesign=args.redesign,
+                          figures=not args.no_figures)
     return run_demo(options)

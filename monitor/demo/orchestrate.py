@@ -6,11 +6,12 @@ import json
 import sys
 import time
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from monitor.demo.live import Scenario
 from monitor.errors import UserError
 
 __all__ = ["DemoOptions", "run_demo"]
@@ -18,14 +19,8 @@ __all__ = ["DemoOptions", "run_demo"]
 
 @dataclass(frozen=True)
 class DemoOptions:
+    scenario: Scenario = field(default_factory=Scenario)
     out: str = "demo-out"
-    plant: str = "paper-continuous"
-    steps: int = 100
-    speedup: float = 10.0
-    fault: str = "bias:2@20"
-    delay: str = "uniform:0:0.46"
-    wind: str = "paper"
-    seed: int = 0
     methods: tuple[str, ...] = ("certified", "paper", "separate")
     runs: int | None = None
     redesign: bool = False
@@ -72,7 +67,7 @@ def _gains_for(method: str, plant, path: Path, redesign: bool, progress: _Progre
     return read_gains(path)
 
 
-def run_demo(opt: DemoOptions) -> int:
+def run_demo(options: DemoOptions) -> int:
     from monitor.demo.report import Row, format_table, row_from_recording
     from monitor.plant import load_plant
     from monitor.verify import verify_gains
@@ -80,11 +75,12 @@ def run_demo(opt: DemoOptions) -> int:
 
     t0 = time.monotonic()
     progress = _Progress()
-    plant = load_plant(opt.plant)
+    opt, scenario = options, options.scenario
+    plant = load_plant(scenario.plant)
     if plant.continuous is None:
-        raise UserError(f"the demo flies a continuous plant; '{opt.plant}' is discrete (try paper-continuous)")
-    fault = parse_fault_spec(opt.fault)  # fail early on a bad SPEC, before any daemon starts
-    parse_delay_spec(opt.delay, opt.seed)
+        raise UserError(f"the demo flies a continuous plant; '{scenario.plant}' is discrete (try paper-continuous)")
+    fault = parse_fault_spec(scenario.fault)  # fail early on a bad SPEC, before any daemon starts
+    parse_delay_spec(scenario.delay, scenario.seed)
     out = Path(opt.out)
     (out / "gains").mkdir(parents=True, exist_ok=True)
     gains = {m: _gains_for(m, plant, out / "gains" / f"{m}.toml", opt.redesign, progress) for m in opt.methods}
@@ -95,13 +91,11 @@ def run_demo(opt: DemoOptions) -> int:
         progress(f"{m:<10} verify: {'stable' if v.stable else 'UNSTABLE'} (rho_max {v.rho_max:.3f}, "
                  f"time-varying {v.rho_time_varying:.3f})", final=True)
     cert = {m: {True: "valid", False: "invalid", None: "none"}[v.certificate_valid] for m, v in verdicts.items()}
-    subtitle = (f"{plant.name}, fault {opt.fault}, delay {opt.delay} s, wind {opt.wind}, seed {opt.seed}")
+    subtitle = f"{plant.name}, fault {scenario.fault}, delay {scenario.delay} s, wind {scenario.wind}, seed {scenario.seed}"
     if opt.runs:
         return _monte_carlo(opt, plant, gains, verdicts, cert, out, progress, t0)
-    from monitor.demo.live import Scenario, run_live
+    from monitor.demo.live import run_live
 
-    scenario = Scenario(plant=opt.plant, steps=opt.steps, speedup=opt.speedup, fault=opt.fault, delay=opt.delay,
-                        wind=opt.wind, seed=opt.seed)
     rows: list[Row] = []
     traces = {}
     runs = {}
@@ -109,7 +103,7 @@ def run_demo(opt: DemoOptions) -> int:
         live = run_live(m, Path(gf.source), scenario, out, progress)
         progress(f"{m:<10} live: {len(live.estimates)} estimates over Zenoh in {live.wall_seconds:.1f} s, "
                  f"recording {live.rrd}", final=True)
-        row, trace = row_from_recording(m, live.rrd, opt.fault, verdicts[m].stable, cert[m],
+        row, trace = row_from_recording(m, live.rrd, scenario.fault, verdicts[m].stable, cert[m],
                                         float(gf.meta.get("gamma_e", float("nan"))), float(gf.meta.get("gamma_z", float("nan"))))
         rows.append(row)
         traces[m] = trace
@@ -121,7 +115,7 @@ def run_demo(opt: DemoOptions) -> int:
 
         unstable = frozenset(m for m, v in verdicts.items() if not v.stable)
         figures = [str(p) for p in write_figures(traces, fault.onset, out, subtitle, unstable)]
-    print(f"\nPaper scenario, live over MAVLink/UDP + Zenoh ({subtitle}; {opt.steps} samples at {opt.speedup:g}x)\n")
+    print(f"\nPaper scenario, live over MAVLink/UDP + Zenoh ({subtitle}; {scenario.steps} samples at {scenario.speedup:g}x)\n")
     print(format_table(rows))
     print("\nFE settling: samples after onset until |f_hat - f| <= 5 % of the fault for good; no design can settle "
           "before 2 (paper-findings). Alarm delay in samples after onset.")
@@ -138,10 +132,11 @@ def run_demo(opt: DemoOptions) -> int:
 def _monte_carlo(opt: DemoOptions, plant, gains, verdicts, cert, out: Path, progress, t0: float) -> int:
     from monitor.demo.montecarlo import monte_carlo
 
+    sc = opt.scenario
     results = {}
     for m, gf in gains.items():
         progress(f"{m:<10} Monte-Carlo: {opt.runs} runs ...")
-        scores = monte_carlo(plant, gf.gains, opt.runs, opt.steps, opt.fault, opt.delay, opt.wind, opt.seed)
+        scores = monte_carlo(plant, gf.gains, opt.runs, sc.steps, sc.fault, sc.delay, sc.wind, sc.seed)
         settle = [s.settling_steps for s in scores]
         settled = [s for s in settle if s is not None]
         results[m] = {
@@ -153,8 +148,8 @@ def _monte_carlo(opt: DemoOptions, plant, gains, verdicts, cert, out: Path, prog
             "peak_alpha_worst": float(max(s.peak_alpha_after for s in scores if s.peak_alpha_after is not None)),
         }
         progress(f"{m:<10} Monte-Carlo: done", final=True)
-    print(f"\nMonte-Carlo over {opt.runs} delay seeds from {opt.seed} ({plant.name}, fault {opt.fault}, delay {opt.delay} s,"
-          f" {opt.steps} samples; simulation only)\n")
+    print(f"\nMonte-Carlo over {opt.runs} delay seeds from {sc.seed} ({plant.name}, fault {sc.fault}, delay {sc.delay} s,"
+          f" {sc.steps} samples; simulation only)\n")
     head = f"{'design':<10} {'real loop':<9} {'settled':>8} {'settling mean':>14} {'worst':>6} {'RMS e_f':>9} {'worst |alpha|':>14}"
     print(head)
     print("-" * len(head))
