@@ -26,12 +26,24 @@ __all__ = ["EstimatorState", "StepResult", "Estimator"]
 
 @dataclass
 class EstimatorState:
-    """Everything one vehicle's loop remembers between samples."""
+    """Everything one vehicle's loop remembers between samples: ``z = [x_hat; f_hat; u(k-1)]``."""
 
-    x_hat: np.ndarray
-    f_hat: np.ndarray
-    u_prev: np.ndarray
+    z: np.ndarray
+    n: int
+    q: int
     k_last: int | None = None
+
+    @property
+    def x_hat(self) -> np.ndarray:
+        return self.z[: self.n]
+
+    @property
+    def f_hat(self) -> np.ndarray:
+        return self.z[self.n : self.n + self.q]
+
+    @property
+    def u_prev(self) -> np.ndarray:
+        return self.z[self.n + self.q :]
 
 
 @dataclass(frozen=True)
@@ -45,24 +57,34 @@ class StepResult:
 
 
 class Estimator:
-    """The FE/FTC law for one plant and one set of gains; state lives in ``EstimatorState``."""
+    """The FE/FTC law for one plant and one set of gains; state lives in ``EstimatorState``.
+
+    Why one precomputed matrix: the live loop runs this per sample per vehicle, and for these tiny sizes
+    numpy's per-call overhead dominates. Substituting the controller into the observer gives, with
+    ``z = [x_hat; f_hat; u(k-1)]``, ``[u; z+; r] = T [z; y]``: one matrix product per sample. The
+    equations in the module docstring are what ``T`` is built from (``_transition``) and what the tests check.
+    """
 
     def __init__(self, plant: Plant, gains: Gains, max_gap: int = 50) -> None:
         gains.check_shapes(plant)
         self.plant = plant
         self.gains = gains
         self.max_gap = max_gap
+        self._T = _transition(plant, gains)
+        n, q, m = plant.n, plant.q, plant.m
+        N = n + q + m
+        predict = np.eye(N)  # a lost sample: no innovation, the actuator held u(k-1)
+        predict[:n, :n] = plant.A
+        predict[:n, n : n + q] = plant.Df
+        predict[:n, n + q :] = plant.B0 + plant.B1
+        self._predict_T = predict
+        self._m, self._N = m, N
 
     def initial_state(self) -> EstimatorState:
         p = self.plant
-        return EstimatorState(x_hat=np.zeros(p.n), f_hat=np.zeros(p.q), u_prev=np.zeros(p.m))
+        return EstimatorState(z=np.zeros(p.n + p.q + p.m), n=p.n, q=p.q)
 
-    def _predict(self, s: EstimatorState) -> None:
-        """Advance over a sample whose telemetry was lost: no innovation, and the actuator held u(k-1)."""
-        p = self.plant
-        s.x_hat = p.A @ s.x_hat + (p.B0 + p.B1) @ s.u_prev + p.Df @ s.f_hat
-
-    def step(self, s: EstimatorState, k: int, y: np.ndarray) -> StepResult:
+    def step(self, s: EstimatorState, k: int, y) -> StepResult:
         """Process sample k in place. Raises ValueError for a stale or duplicate k (never processed twice)."""
         if s.k_last is not None and k <= s.k_last:
             raise ValueError(f"sample {k} is not newer than {s.k_last}")
@@ -70,19 +92,25 @@ class Estimator:
         if s.k_last is not None:
             gap = k - s.k_last - 1
             if gap > self.max_gap:
-                fresh = self.initial_state()
-                s.x_hat, s.f_hat, s.u_prev = fresh.x_hat, fresh.f_hat, fresh.u_prev
-            else:
-                for _ in range(gap):
-                    self._predict(s)
+                s.z = np.zeros(self._N)
+            elif gap:
+                s.z = np.linalg.matrix_power(self._predict_T, gap) @ s.z
                 skipped = gap
-        p, g = self.plant, self.gains
-        y = np.asarray(y, dtype=float).reshape(p.l)
-        x_hat, f_hat = s.x_hat.copy(), s.f_hat.copy()
-        r = y - p.C @ x_hat
-        u = g.K1 @ y + g.K2 @ s.u_prev + g.K3 @ f_hat
-        s.x_hat = p.A @ x_hat + p.B0 @ u + p.B1 @ s.u_prev + p.Df @ f_hat + g.L @ r
-        s.f_hat = f_hat + g.M @ r
-        s.u_prev = u
+        z = s.z
+        out = self._T @ np.concatenate((z, np.asarray(y, dtype=float).ravel()))
+        m, N, n, q = self._m, self._N, s.n, s.q
+        s.z = out[m : m + N]
         s.k_last = k
-        return StepResult(k=k, u=u, x_hat=x_hat, f_hat=f_hat, residual=r, skipped=skipped)
+        return StepResult(k=k, u=out[:m], x_hat=z[:n], f_hat=z[n : n + q], residual=out[m + N :], skipped=skipped)
+
+
+def _transition(plant: Plant, g: Gains) -> np.ndarray:
+    """``T`` with ``[u; x_hat+; f_hat+; u; r] = T [x_hat; f_hat; u(k-1); y]`` (eqs. 5 and 6 combined)."""
+    A, B0, B1, C, Df = plant.A, plant.B0, plant.B1, plant.C, plant.Df
+    n, q, m, l = plant.n, plant.q, plant.m, plant.l
+    zero = np.zeros
+    u_row = np.hstack([zero((m, n)), g.K3, g.K2, g.K1])
+    x_row = np.hstack([A - g.L @ C, Df + B0 @ g.K3, B1 + B0 @ g.K2, g.L + B0 @ g.K1])
+    f_row = np.hstack([-g.M @ C, np.eye(q), zero((q, m)), g.M])
+    r_row = np.hstack([-C, zero((l, q)), zero((l, m)), np.eye(l)])
+    return np.vstack([u_row, x_row, f_row, u_row, r_row])

@@ -77,3 +77,22 @@ def test_estimator_refuses_stale_and_duplicate_samples_and_predicts_over_gaps():
     with pytest.raises(ValueError):
         est.step(s, 4, np.array([0.1]))
     assert est.step(s, 8, np.array([0.1])).skipped == 2
+
+
+def test_fused_estimator_step_equals_equations_5_and_6():
+    p = load_plant("paper")
+    g = Gains(**GAINS, K3=fault_cancelling_K3(p, GAINS["K2"]))
+    est = Estimator(p, g)
+    s = est.initial_state()
+    x_hat, f_hat, u_prev = np.zeros(2), np.zeros(1), np.zeros(1)
+    rng = np.random.default_rng(5)
+    for k in range(30):
+        y = rng.normal(size=1)
+        r = y - p.C @ x_hat
+        u = g.K1 @ y + g.K2 @ u_prev + g.K3 @ f_hat
+        step = est.step(s, k, y)
+        np.testing.assert_allclose(step.u, u, atol=1e-12)
+        np.testing.assert_allclose(step.residual, r, atol=1e-12)
+        np.testing.assert_allclose(step.f_hat, f_hat, atol=1e-12)
+        x_hat, f_hat = p.A @ x_hat + p.B0 @ u + p.B1 @ u_prev + p.Df @ f_hat + g.L @ r, f_hat + g.M @ r
+        u_prev = u
