@@ -20,6 +20,8 @@ from dataclasses import dataclass, fields
 from typing import Callable
 
 from monitor.errors import UserError
+from monitor.wire.fastframe import ACTUATOR, AOA_SSA, ATTITUDE, Frame, split_telemetry
+from monitor.wire.fastframe import encode_command as fast_encode_command
 from monitor.wire.mavlink import (
     MONITOR_COMPONENT,
     Command,
@@ -35,9 +37,6 @@ __all__ = ["Telemetry", "LinkCounters", "MavlinkDecoder", "UdpEndpoint", "parse_
 log = logging.getLogger(__name__)
 
 MONITOR_SYSID = 255  # a ground-station id, as MAVProxy uses; vehicles are 1-254
-_ATTITUDE = mavlink.MAVLINK_MSG_ID_ATTITUDE
-_AOA_SSA = mavlink.MAVLINK_MSG_ID_AOA_SSA
-_ACTUATOR = mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS
 _HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
 _BAD_DATA = mavlink.MAVLINK_MSG_ID_BAD_DATA
 _UNKNOWN = mavlink.MAVLINK_MSG_ID_UNKNOWN
@@ -148,14 +147,28 @@ class MavlinkDecoder:
         self.counters.peers_evicted += len(stale)
 
     def decode(self, data: bytes, addr: object) -> list[Telemetry]:
-        """Every complete sample in one datagram (normally one). Never raises on bad input."""
+        """Every complete sample in one datagram (normally one). Never raises on bad input.
+
+        Unsigned links try ``fastframe.split_telemetry`` first; any datagram it does not vouch for goes
+        through pymavlink, which does the counting of rejects.
+        """
         c = self.counters
         c.datagrams += 1
         codec = self._peer(addr, self.clock()).codec
+        frames = split_telemetry(data) if self.signing_key is None else None
+        if frames is None:
+            frames = self._parse(codec, data)
+        out = _assemble(frames, c)
+        c.samples += len(out)
+        return out
+
+    def _parse(self, codec: mavlink.MAVLink, data: bytes) -> list[Frame]:
+        """pymavlink's robust parse of a datagram: rejects counted, telemetry as ``Frame`` tuples."""
+        c = self.counters
         try:
             msgs = codec.parse_buffer(data) or []
         except Exception as exc:  # robust parsing should prevent this; a packet must never stop the loop
-            log.debug("parser raised on a datagram from %s: %s", addr, exc)
+            log.debug("parser raised on a datagram: %s", exc)
             msgs = []
             c.garbage += 1
         if len(codec.buf) > codec.buf_index:
@@ -164,8 +177,7 @@ class MavlinkDecoder:
             codec.buf_index = 0
             codec.expected_length = mavlink.HEADER_LEN_V1 + 2
             codec.have_prefix_error = False
-        out: list[Telemetry] = []
-        attitude: dict[int, object] = {}
+        frames: list[Frame] = []
         for msg in msgs:
             mid = msg._header.msgId  # the class attribute `id` is 0 for BAD_DATA
             if mid == _BAD_DATA:
@@ -173,36 +185,27 @@ class MavlinkDecoder:
                     c.bad_signature += 1
                 else:
                     c.garbage += 1
-                continue
-            if mid == _UNKNOWN or msg._msgbuf[0] == 0xFE:
+            elif mid == _UNKNOWN or msg._msgbuf[0] == 0xFE:
                 c.wrong_dialect += 1
-                continue
-            if mid == _ATTITUDE:
-                attitude[msg._header.srcSystem] = msg
-            elif mid == _AOA_SSA:
-                sysid = msg._header.srcSystem
-                att = attitude.get(sysid)
-                if att is None or att.time_boot_ms != (msg.time_usec // 1000) & 0xFFFFFFFF:
-                    c.incomplete += 1
-                    continue
-                out.append(Telemetry(sysid, msg.time_usec, msg.AOA, att.pitchspeed * _DEG_PER_RAD))
-            elif mid == _ACTUATOR:
-                sysid = msg._header.srcSystem
-                for tel in out:
-                    if tel.sysid == sysid and tel.time_usec == msg.time_usec:
-                        tel.elevator_deg = msg.actuator[0]
+            elif mid == ATTITUDE:
+                frames.append((mid, msg._header.srcSystem, msg.time_boot_ms, msg.pitchspeed))
+            elif mid == AOA_SSA:
+                frames.append((mid, msg._header.srcSystem, msg.time_usec, msg.AOA))
+            elif mid == ACTUATOR:
+                frames.append((mid, msg._header.srcSystem, msg.time_usec, msg.actuator[0]))
             elif mid == _HEARTBEAT:
                 c.heartbeats += 1
             else:
                 c.foreign += 1
-        c.samples += len(out)
-        return out
+        return frames
 
     def encode_command(self, addr: object, command: Command, h: float) -> bytes:
         """The reply frame, from the codec of the peer the sample came from (its own sequence and signing)."""
         peer = self._peers.get(addr)
         if peer is None:  # evicted between decode and reply: a fresh codec is still correct
             peer = self._peer(addr, self.clock())
+        if self.signing_key is None:
+            return fast_encode_command(peer.codec, command, h)
         return encode_command(peer.codec, command, h)
 
     def bump_signing_clocks(self) -> None:
@@ -210,6 +213,28 @@ class MavlinkDecoder:
         if self.signing_key is not None:
             for peer in self._peers.values():
                 bump_signing_clock(peer.codec)
+
+
+def _assemble(frames: list[Frame], c: LinkCounters) -> list[Telemetry]:
+    """Samples from one datagram's telemetry frames: AOA_SSA needs the ATTITUDE of its instant before it."""
+    out: list[Telemetry] = []
+    attitude: dict[int, tuple[int, float]] | None = None
+    for mid, sysid, instant, value in frames:
+        if mid == ATTITUDE:
+            if attitude is None:
+                attitude = {}
+            attitude[sysid] = instant, value
+        elif mid == AOA_SSA:
+            att = attitude.get(sysid) if attitude is not None else None
+            if att is None or att[0] != (instant // 1000) & 0xFFFFFFFF:
+                c.incomplete += 1
+                continue
+            out.append(Telemetry(sysid, instant, value, att[1] * _DEG_PER_RAD))
+        else:  # ACTUATOR
+            for tel in out:
+                if tel.sysid == sysid and tel.time_usec == instant:
+                    tel.elevator_deg = value
+    return out
 
 
 class UdpEndpoint(asyncio.DatagramProtocol):
