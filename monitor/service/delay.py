@@ -53,9 +53,7 @@ class DelayTracker:
         residual = y - (self._sa - r * self._st) / n - r * x
         span = x / max(n - 1, 1)  # mean sample interval in vehicle seconds
         floor = self._floor
-        if floor is None or residual < floor:
-            floor = residual
-        else:
-            floor += self.leak * r * span
+        # the envelope leaks upward, but never past the current residual: a delay is never negative
+        floor = residual if floor is None else min(floor + self.leak * r * span, residual)
         self._floor = floor
         return (residual - floor) / r
