@@ -30,18 +30,15 @@ SLACK = 4  # "within a few samples of the limit"
 
 
 @pytest.fixture(scope="session")
-def gains_file(request) -> Path:
-    """A certified design for paper-continuous, computed once and cached by plant hash (~4-13 s the first time)."""
+def gains_file(tmp_path_factory) -> Path:
+    """A certified design for paper-continuous, computed once per test session (~4 s)."""
+    from monitor.design.certified import design_certified
+    from monitor.gains import write_gains
     from monitor.plant import load_plant
 
     plant = load_plant("paper-continuous")
-    cache = Path(request.config.cache.mkdir("monitor-gains"))
-    path = cache / f"{plant.digest.replace(':', '-')}.toml"
-    if not path.exists():
-        from monitor.design.certified import design_certified
-        from monitor.gains import write_gains
-
-        write_gains(path, design_certified(plant), plant)
+    path = tmp_path_factory.mktemp("gains") / "certified.toml"
+    write_gains(path, design_certified(plant), plant)
     return path
 
 
