@@ -15,6 +15,8 @@ import time
 from pathlib import Path
 from typing import Callable
 
+from monitor.process import stop_process_group
+
 REPO = Path(__file__).resolve().parent.parent
 
 
@@ -70,16 +72,7 @@ class Daemon:
             raise AssertionError(f"{self.cmd[2]} did not exit within {timeout} s; log:\n{self.log()[-3000:]}") from None
 
     def stop(self, timeout: float = 10.0) -> int | None:
-        if self.proc is None:
-            return None
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait(timeout=5)
-        return self.proc.returncode
+        return None if self.proc is None else stop_process_group(self.proc, timeout)
 
     def __exit__(self, *exc) -> None:
         try:

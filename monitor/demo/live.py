@@ -14,7 +14,6 @@ from __future__ import annotations
 import errno
 import json
 import os
-import signal
 import socket
 import subprocess
 import sys
@@ -25,6 +24,7 @@ from pathlib import Path
 from typing import Callable
 
 from monitor.errors import UserError
+from monitor.process import stop_process_group
 
 __all__ = ["Scenario", "LiveRun", "run_live", "free_port"]
 
@@ -94,15 +94,9 @@ class _Daemon:
                                      stdin=subprocess.DEVNULL, env=env, start_new_session=True)
 
     def stop(self, timeout: float = 15.0) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait(timeout=5)
+        code = stop_process_group(self.proc, timeout)
         self._fh.close()
-        return self.proc.returncode
+        return code
 
 
 def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progress: Callable[[str], None]) -> LiveRun:
