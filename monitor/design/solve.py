@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import cvxpy as cp
 
 ACCEPTED = (cp.OPTIMAL,)
@@ -18,7 +20,9 @@ def solve_problem(problem: cp.Problem) -> str:
     inequality it claims, and a certificate that is not one is worse than none.
     """
     try:
-        problem.solve(solver=cp.CLARABEL)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # cvxpy's "may be inaccurate": such results are refused below
+            problem.solve(solver=cp.CLARABEL)
     except cp.error.SolverError as exc:
         raise SolveFailed(f"solver error: {exc}") from None
     if problem.status not in ACCEPTED:
