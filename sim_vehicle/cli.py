@@ -75,8 +75,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--x0", default=None, metavar="A,Q", help="initial state (default: 0)")
     n = run.add_argument_group("network (emulated on top of the real UDP path)")
     n.add_argument("--delay", default=None, metavar="SPEC",
-                   help="total sensor->actuator delay in simulated seconds (default: uniform over the plant's "
-                        "[tau_min, tau_max], 0:0.4612 for paper-continuous)")
+                   help="total sensor->actuator delay in simulated seconds (default: uniform:0:0.46 for h = 1 s, "
+                        "i.e. uniform over [tau_min, min(0.46 h, tau_max)])")
     n.add_argument("--delay-split", default=0.5, type=float, metavar="R",
                    help="share of the delay spent before the sample is sent (sensor->controller); the rest is "
                         "the controller->actuator budget (default: 0.5)")

@@ -111,7 +111,8 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
     if not speedup > 0:
         raise UserError(f"--speedup must be positive, got {speedup:g}")
     seed = int(args.seed)
-    delay_text = args.delay or f"uniform:{plant.tau_min:g}:{plant.tau_max:g}"
+    # CONTRACT.md's default, uniform:0:0.46 for h = 1 s, kept inside the plant's own delay interval
+    delay_text = args.delay or f"uniform:{plant.tau_min:g}:{min(0.46 * plant.h, plant.tau_max):g}"
     x0 = None
     if args.x0 is not None:
         parts = args.x0 if isinstance(args.x0, list) else str(args.x0).split(",")
