@@ -7,6 +7,7 @@ it was designed for, so that ``verify`` can re-check the certificate and ``run``
 
 from __future__ import annotations
 
+import json
 import os
 import tempfile
 import tomllib
@@ -14,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomli_w
 
 from monitor.closed_loop import Gains
 from monitor.design.result import DesignResult
@@ -81,12 +81,38 @@ def write_gains(path: str | Path, result: DesignResult, plant: Plant) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name, dir=path.parent)
     try:
-        with os.fdopen(fd, "wb") as fh:
-            tomli_w.dump(doc, fh)
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(_to_toml(doc))
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _toml_value(value: Any) -> str:
+    """One TOML value on one line: matrices stay readable as ``[[1.87], [1.63]]``, as in CONTRACT.md.
+
+    Why not a TOML library: tomli-w writes every nested array over several lines; our values are only
+    strings, numbers and (nested) lists of them, and JSON's string escapes are valid TOML escapes.
+    """
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value)  # Python's float repr (incl. inf, nan) is valid TOML
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot write {type(value).__name__} to a gains file")
+
+
+def _to_toml(doc: dict[str, dict[str, Any]]) -> str:
+    lines: list[str] = []
+    for table, entries in doc.items():
+        lines.append(f"[{table}]")
+        lines.extend(f"{key} = {_toml_value(value)}" for key, value in entries.items())
+        lines.append("")
+    return "\n".join(lines)
 
 
 def read_gains(path: str | Path) -> GainsFile:
