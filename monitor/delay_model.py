@@ -16,10 +16,10 @@ from functools import lru_cache
 
 import numpy as np
 
-from monitor.discretize import F_of_tau, b0_b1, integral_expm, reconstruct_continuous
+from monitor.discretize import F_of_tau, b0_b1, delta_exact, delta_lemma1, integral_expm, reconstruct_continuous
 from monitor.plant import ContinuousModel, Plant
 
-__all__ = ["b0_of_tau", "tau_grid", "b0_polytope", "curve_model", "input_sum"]
+__all__ = ["b0_of_tau", "tau_grid", "b0_polytope", "curve_model", "input_sum", "delta_summary"]
 
 
 def input_sum(plant: Plant) -> np.ndarray:
@@ -119,3 +119,15 @@ def _prune(cloud: np.ndarray) -> np.ndarray:
         return cloud[ConvexHull(cloud).vertices]
     except Exception:  # degenerate (flat) clouds: keep every point, still a valid cover
         return cloud
+
+
+def delta_summary(plant: Plant) -> dict[str, float | None]:
+    """The delay figures a user wants next to a design: tau_bar, Lemma 1's delta as printed, the plant
+    file's delta, and the exact ``max |F(tau)|`` (from the reconstructed A_c for a discrete plant)."""
+    tau_bar = plant.tau_bar
+    return {
+        "tau_bar": tau_bar,
+        "delta_lemma1": delta_lemma1(plant.A, plant.h, plant.tau_min, tau_bar),
+        "delta_file": plant.delta,
+        "delta_exact": delta_exact(curve_model(plant), plant.h, plant.tau_min, plant.tau_max, tau_bar),
+    }

@@ -24,7 +24,7 @@ from scipy.optimize import minimize_scalar
 from monitor.errors import UserError
 
 if TYPE_CHECKING:
-    from monitor.plant import ContinuousModel, Plant
+    from monitor.plant import ContinuousModel
 
 __all__ = [
     "Discrete",
@@ -130,17 +130,3 @@ def reconstruct_continuous(A: np.ndarray, Bsum: np.ndarray, Df: np.ndarray, Dd: 
     _, gamma_h = integral_expm(A_c, h)
     solve = np.linalg.solve
     return ContinuousModel(A_c=A_c, B_c=solve(gamma_h, Bsum), D_cf=solve(gamma_h, Df), D_cd=solve(gamma_h, Dd))
-
-
-def delay_model_summary(plant: Plant) -> dict[str, float | None]:
-    """The delay-related figures a user wants to see next to a design: tau_bar and both deltas."""
-    tau_bar = plant.tau_bar
-    out: dict[str, float | None] = {
-        "tau_bar": tau_bar,
-        "delta_lemma1": delta_lemma1(plant.A, plant.h, plant.tau_min, tau_bar),
-        "delta_file": plant.delta,
-        "delta_exact": None,
-    }
-    if plant.continuous is not None:
-        out["delta_exact"] = delta_exact(plant.continuous, plant.h, plant.tau_min, plant.tau_max, tau_bar)
-    return out

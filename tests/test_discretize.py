@@ -51,3 +51,14 @@ def test_delta_exact_is_the_max_over_the_interval():
     samples = [np.linalg.norm(F_of_tau(p.continuous, p.h, t, p.tau_bar), 2) for t in np.linspace(0, p.tau_max, 997)]
     assert exact >= max(samples) - 1e-12
     assert exact <= max(samples) * 1.001
+
+
+def test_delta_summary_reports_both_deltas_for_either_form():
+    from monitor.delay_model import delta_summary
+
+    printed = delta_summary(load_plant("paper"))
+    assert printed["delta_lemma1"] == pytest.approx(0.3202, abs=2e-4) and printed["delta_file"] == pytest.approx(0.3202)
+    cont = delta_summary(load_plant("paper-continuous"))
+    # the same A_c behind both presets, so the exact figure agrees; it is well below Lemma 1's
+    assert printed["delta_exact"] == pytest.approx(cont["delta_exact"], rel=1e-9)
+    assert cont["delta_exact"] < cont["delta_lemma1"] and cont["delta_file"] is None

@@ -33,6 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from monitor.design import run_design
+    from monitor.delay_model import delta_summary
     from monitor.errors import UserError
     from monitor.gains import write_gains
     from monitor.plant import load_plant
@@ -57,6 +58,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"gamma_e    {result.gamma_e:.4f}   gamma_z {result.gamma_z:.4f}   ({result.bounds_apply_to})")
         print(f"solver     CLARABEL {result.solver_status}; build {result.build_seconds:.3f} s, "
               f"solve {result.solve_seconds:.3f} s, total {result.total_seconds:.3f} s")
+        deltas = delta_summary(plant)
+        print(f"delta      Lemma 1 as printed {deltas['delta_lemma1']:.4f}; exact max |F(tau)| {deltas['delta_exact']:.4f}; "
+              f"plant file {deltas['delta_file'] or '-'} (tau_bar {deltas['tau_bar']:.4f} s). "
+              + ("Used: the exact B0(tau) curve, in a polytope." if result.method == "certified" else
+                 "Used: none (nominal delay)." if result.method == "separate" else
+                 "Used: none; Theorem 1 treats d_tau as an outside input."))
         for note in result.notes:
             print(f"note       {note}")
         print(f"wrote      {args.out}")
