@@ -15,7 +15,7 @@ import sys
 from monitor import __version__
 from monitor.errors import run_cli_command
 
-COMMANDS = ("design", "verify", "run", "subscribe", "replay", "demo")
+COMMANDS = ("design", "verify", "margin", "threshold", "run", "analyse", "subscribe", "replay", "router", "demo")
 
 
 def build_parser() -> argparse.ArgumentParser:
