@@ -1,19 +1,27 @@
 """Observer (5) and controller (6) for one vehicle, one sample at a time: the maths of the live loop.
 
-Pure and small on purpose: ``monitor run``, the demo's Monte-Carlo and the tests step the same code,
-and ``verify`` checks the same matrices in closed form. Per sample k, with measurement ``y(k)``:
+Pure and small on purpose: ``monitor run``, ``monitor analyse``, the demo's Monte-Carlo and the tests
+step the same code, and ``verify`` checks the same matrices in closed form. Per sample k, with
+measurement ``y(k)`` and u(k-1) the deflection in force at the instant:
 
     r(k)    = y(k) - C x_hat(k)                                   (residual)
-    u(k)    = K1 y(k) + K2 u(k-1) + K3 f_hat(k)                   (controller, eq. 6)
+    u(k)    = sat(K1 y(k) + K2 u(k-1) + K3 f_hat(k))              (controller, eq. 6, at the actuator limit)
     x_hat(k+1) = A x_hat + B0 u(k) + B1 u(k-1) + Df f_hat + L r   (observer, eq. 5)
     f_hat(k+1) = f_hat + M r
 
 ``f_hat(k)`` (the estimate that went into ``u(k)``) is what is reported for sample k, so that
 ``e_f(k) = f(k) - f_hat(k)`` lines up with the truth at the same k.
+
+Which u(k-1): the contract says the deflection the vehicle *reports* at sample k (``u_prev``), because a
+command that was lost or late never acted; only when no report came does the estimator use its own
+last command. Observe-only (``observe``): the vehicle's own controller issued u(k), reported with the
+sample, and only eq. (5) runs. Why saturate here: a command beyond the actuator's travel is not what
+acts on the plant, and an observer fed the unsaturated value would learn a fault that is not there.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,43 +57,55 @@ class EstimatorState:
 @dataclass(frozen=True)
 class StepResult:
     k: int
-    u: np.ndarray
+    u: np.ndarray  # the command (saturated) or, observe-only, the reported u(k)
     x_hat: np.ndarray  # estimate at k (before the update)
     f_hat: np.ndarray  # estimate at k (before the update)
     residual: np.ndarray
     skipped: int  # samples predicted open-loop because their telemetry never arrived
+    reset: bool = False  # the state had become non-finite and was reset to zero
 
 
 class Estimator:
     """The FE/FTC law for one plant and one set of gains; state lives in ``EstimatorState``.
 
-    Why one precomputed matrix: the live loop runs this per sample per vehicle, and for these tiny sizes
-    numpy's per-call overhead dominates. Substituting the controller into the observer gives, with
-    ``z = [x_hat; f_hat; u(k-1)]``, ``[u; z+; r] = T [z; y]``: one matrix product per sample. The
-    equations in the module docstring are what ``T`` is built from (``_transition``) and what the tests check.
+    Why precomputed matrices: the live loop runs this per sample per vehicle, and for these tiny sizes
+    numpy's per-call overhead dominates. ``_U`` gives ``u = _U [z; y]`` and ``_O`` gives
+    ``[x_hat+; f_hat+; r] = _O [x_hat; f_hat; u(k-1); y; u(k)]``; the equations in the module docstring
+    are what they are built from and what the tests check.
     """
 
-    def __init__(self, plant: Plant, gains: Gains, max_gap: int = 50) -> None:
+    def __init__(self, plant: Plant, gains: Gains, max_gap: int = 50, u_limit: float | None = None) -> None:
         gains.check_shapes(plant)
         self.plant = plant
         self.gains = gains
         self.max_gap = max_gap
-        self._T = _transition(plant, gains)
-        n, q, m = plant.n, plant.q, plant.m
+        self.u_limit = u_limit if u_limit is not None else plant.actuator.limit
+        A, B0, B1, C, Df = plant.A, plant.B0, plant.B1, plant.C, plant.Df
+        n, q, m, l = plant.n, plant.q, plant.m, plant.l
+        self._U = np.hstack([np.zeros((m, n)), gains.K3, gains.K2, gains.K1])
+        self._O = np.vstack([
+            np.hstack([A - gains.L @ C, Df, B1, gains.L, B0]),
+            np.hstack([-gains.M @ C, np.eye(q), np.zeros((q, m)), gains.M, np.zeros((q, m))]),
+            np.hstack([-C, np.zeros((l, q)), np.zeros((l, m)), np.eye(l), np.zeros((l, m))]),
+        ])
         N = n + q + m
         predict = np.eye(N)  # a lost sample: no innovation, the actuator held u(k-1)
-        predict[:n, :n] = plant.A
-        predict[:n, n : n + q] = plant.Df
-        predict[:n, n + q :] = plant.B0 + plant.B1
+        predict[:n, :n] = A
+        predict[:n, n : n + q] = Df
+        predict[:n, n + q :] = B0 + B1
         self._predict_T = predict
-        self._m, self._N = m, N
+        self._m, self._N, self._nq = m, N, n + q
 
     def initial_state(self) -> EstimatorState:
         p = self.plant
         return EstimatorState(z=np.zeros(p.n + p.q + p.m), n=p.n, q=p.q)
 
-    def step(self, s: EstimatorState, k: int, y) -> StepResult:
-        """Process sample k in place. Raises ValueError for a stale or duplicate k (never processed twice)."""
+    def saturate(self, u: np.ndarray) -> np.ndarray:
+        lim = self.u_limit
+        return np.clip(u, -lim, lim) if lim is not None else u
+
+    def _advance(self, s: EstimatorState, k: int, u_prev) -> int:
+        """Predict over lost samples up to k, then put the reported u(k-1) in the state."""
         if s.k_last is not None and k <= s.k_last:
             raise ValueError(f"sample {k} is not newer than {s.k_last}")
         skipped = 0
@@ -96,21 +116,34 @@ class Estimator:
             elif gap:
                 s.z = np.linalg.matrix_power(self._predict_T, gap) @ s.z
                 skipped = gap
-        z = s.z
-        out = self._T @ np.concatenate((z, np.asarray(y, dtype=float).ravel()))
-        m, N, n, q = self._m, self._N, s.n, s.q
-        s.z = out[m : m + N]
+        if u_prev is not None:
+            s.z[self._nq :] = u_prev
+        return skipped
+
+    def _finish(self, s: EstimatorState, k: int, z: np.ndarray, y: np.ndarray, u: np.ndarray,
+                skipped: int) -> StepResult:
+        out = self._O @ np.concatenate((z, y, u))
+        nq = self._nq
+        z_next = np.concatenate((out[:nq], u))
+        reset = not all(math.isfinite(v) for v in z_next)
+        s.z = np.zeros(self._N) if reset else z_next
         s.k_last = k
-        return StepResult(k=k, u=out[:m], x_hat=z[:n], f_hat=z[n : n + q], residual=out[m + N :], skipped=skipped)
+        return StepResult(k=k, u=u, x_hat=z[: s.n], f_hat=z[s.n : nq], residual=out[nq:], skipped=skipped, reset=reset)
 
+    def step(self, s: EstimatorState, k: int, y, u_prev=None) -> StepResult:
+        """Process sample k in place and return the command. Raises ValueError for a stale or duplicate k.
 
-def _transition(plant: Plant, g: Gains) -> np.ndarray:
-    """``T`` with ``[u; x_hat+; f_hat+; u; r] = T [x_hat; f_hat; u(k-1); y]`` (eqs. 5 and 6 combined)."""
-    A, B0, B1, C, Df = plant.A, plant.B0, plant.B1, plant.C, plant.Df
-    n, q, m, l = plant.n, plant.q, plant.m, plant.l
-    zero = np.zeros
-    u_row = np.hstack([zero((m, n)), g.K3, g.K2, g.K1])
-    x_row = np.hstack([A - g.L @ C, Df + B0 @ g.K3, B1 + B0 @ g.K2, g.L + B0 @ g.K1])
-    f_row = np.hstack([-g.M @ C, np.eye(q), zero((q, m)), g.M])
-    r_row = np.hstack([-C, zero((l, q)), zero((l, m)), np.eye(l)])
-    return np.vstack([u_row, x_row, f_row, u_row, r_row])
+        ``u_prev``: the deflection the vehicle reports at k (None: the estimator's own last command).
+        """
+        skipped = self._advance(s, k, u_prev)
+        z = s.z
+        y = np.asarray(y, dtype=float).ravel()
+        u = self.saturate(self._U @ np.concatenate((z, y)))
+        return self._finish(s, k, z, y, u, skipped)
+
+    def observe(self, s: EstimatorState, k: int, y, u_now, u_prev=None) -> StepResult:
+        """Observe-only: eq. (5) with the u(k) the vehicle's own controller issued (no command computed)."""
+        skipped = self._advance(s, k, u_prev)
+        z = s.z
+        y = np.asarray(y, dtype=float).ravel()
+        return self._finish(s, k, z, y, np.asarray(u_now, dtype=float).ravel(), skipped)

@@ -31,7 +31,7 @@ __all__ = ["Plant", "ContinuousModel", "Actuator", "load_plant", "parse_plant", 
 
 PRESETS = {"paper": "paper.toml", "paper-continuous": "paper-continuous.toml"}
 
-_COMMON_KEYS = {"form", "name", "description", "unit", "h", "tau_min", "tau_max", "C", "actuator"}
+_COMMON_KEYS = {"form", "name", "description", "unit", "h", "tau_min", "tau_max", "C", "actuator", "signals"}
 _CONTINUOUS_KEYS = _COMMON_KEYS | {"A_c", "B_c", "D_cf", "D_cd"}
 _DISCRETE_KEYS = _COMMON_KEYS | {"A", "B0", "B1", "Df", "Dd", "delta", "E"}
 _ACTUATOR_KEYS = {"limit", "rate_limit"}
@@ -82,6 +82,7 @@ class Plant:
     actuator: Actuator = field(default_factory=Actuator)
     source: str = "<memory>"
     digest: str = ""
+    signals: dict[str, Any] | None = None  # the raw [signals] table (validated by monitor.link.signals)
 
     @property
     def tau_bar(self) -> float:
@@ -168,7 +169,8 @@ def parse_plant(text: str, source: str = "<memory>") -> Plant:
         description=str(raw.get("description", "")),
         actuator=reader.actuator(),
         source=source,
-        digest=_digest(raw),
+        digest=_digest({k: v for k, v in raw.items() if k != "signals"}),
+        signals=raw.get("signals"),
     )
     if form == "continuous":
         A_c = reader.matrix("A_c", rows=n, cols=n)
@@ -251,6 +253,9 @@ class _Reader:
 
 
 def _digest(raw: dict[str, Any]) -> str:
-    """A hash of the plant's content (not its formatting), so gains can say which plant they are for."""
+    """A hash of the plant's content (not its formatting), so gains can say which plant they are for.
+
+    The ``[signals]`` table is left out: which MAVLink fields carry y and u does not change the dynamics.
+    """
     canonical = json.dumps(raw, sort_keys=True, separators=(",", ":"))
     return "sha256:" + hashlib.sha256(canonical.encode()).hexdigest()[:16]

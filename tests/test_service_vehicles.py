@@ -13,7 +13,7 @@ from monitor.errors import UserError
 from monitor.gains import write_gains
 from monitor.plant import load_plant
 from monitor.service.alarm import AlarmConfig
-from monitor.service.udp_endpoint import Telemetry
+from monitor.link.dialect import layout_by_name
 from monitor.service.vehicles import Fleet, VehicleTable, load_fleet, load_model
 
 
@@ -33,8 +33,14 @@ def gains_path(tmp_path_factory) -> Path:
     return _gains_file(tmp_path_factory.mktemp("g") / "gains.toml")
 
 
-def tel(sysid: int, k: int, alpha: float = 0.1) -> Telemetry:
-    return Telemetry(sysid, k * 1_000_000, alpha, 0.0)
+_AOA = layout_by_name("AOA_SSA")
+
+
+def feed(table: VehicleTable, sysid: int, k: int, route: str, now: float, alpha: float = 0.1):
+    """One AOA_SSA (all the default map's y needs) for sample k; the processed result or None."""
+    ready = table.message(sysid, "AOA_SSA", _AOA.decode(_AOA.unpacker.pack(k * 1_000_000, alpha, 0.0)), route, now)
+    done = [table.process(v, s, 0.0) for v, s in ready]
+    return done[-1] if done else None
 
 
 def test_plant_hash_mismatch_is_refused_unless_forced(gains_path: Path) -> None:
@@ -46,40 +52,40 @@ def test_plant_hash_mismatch_is_refused_unless_forced(gains_path: Path) -> None:
 def test_duplicates_and_stale_are_counted_and_not_processed(gains_path: Path) -> None:
     table = VehicleTable(Fleet(load_model("paper-continuous", gains_path)), AlarmConfig())
     ks = [0, 1, 1, 3, 2, 3, 4, 0]
-    done = [p.result.k for k in ks if (p := table.accept(tel(1, k), "A", 0.0, 0.0)) is not None]
+    done = [p.result.k for k in ks if (p := feed(table, 1, k, "A", 0.0)) is not None]
     assert done == [0, 1, 3, 4]
-    c = table.counters
-    assert (c.processed, c.duplicates, c.stale, c.skipped) == (4, 2, 2, 1)
+    c, a = table.counters, table.assembly_totals()
+    assert (c.processed, a["duplicates"], a["stale"], c.skipped) == (4, 2, 2, 1)
 
 
 def test_unknown_vehicle_refused_with_one_log_line(gains_path: Path, caplog) -> None:
     table = VehicleTable(Fleet(None, {1: load_model("paper-continuous", gains_path)}), AlarmConfig())
     with caplog.at_level("WARNING"):
         for k in range(3):
-            assert table.accept(tel(9, k), "B", 0.0, 0.0) is None
+            assert feed(table, 9, k, "B", 0.0) is None
     assert table.counters.refused == 3
     assert sum("refusing vehicle sysid 9" in r.message for r in caplog.records) == 1
-    assert table.accept(tel(1, 0), "A", 0.0, 0.0) is not None
+    assert feed(table, 1, 0, "A", 0.0) is not None
 
 
 def test_vehicles_have_separate_state_and_expire(gains_path: Path) -> None:
     table = VehicleTable(Fleet(load_model("paper-continuous", gains_path)), AlarmConfig(), timeout=5.0)
     for k in range(5):
-        a = table.accept(tel(1, k, alpha=1.0), "A", float(k), 0.0)
-        b = table.accept(tel(2, k, alpha=0.0), "B", float(k), 0.0)
+        a = feed(table, 1, k, "A", float(k), alpha=1.0)
+        b = feed(table, 2, k, "B", float(k), alpha=0.0)
     assert a.result.f_hat[0] != 0.0 and b.result.f_hat[0] == 0.0
     assert table.expire(8.0) == []
     assert sorted(table.expire(10.0)) == [1, 2]
-    assert table.accept(tel(1, 0), "A", 11.0, 0.0).result.k == 0  # a fresh estimator after the timeout
+    assert feed(table, 1, 0, "A", 11.0).result.k == 0  # a fresh estimator after the timeout
 
 
 def test_restart_from_a_new_peer_starts_fresh_but_a_replay_does_not(gains_path: Path) -> None:
     table = VehicleTable(Fleet(load_model("paper-continuous", gains_path)), AlarmConfig(), timeout=30.0,
                          restart_silence=1.0)
     for k in range(10):
-        table.accept(tel(1, k), "A", k * 0.01, 0.0)
-    assert table.accept(tel(1, 2), "X", 0.095, 0.0) is None  # replay while A is live: stale
-    p = table.accept(tel(1, 0), "B", 2.0, 0.0)  # A silent for ~2 s, B starts over
+        feed(table, 1, k, "A", k * 0.01)
+    assert feed(table, 1, 2, "X", 0.095) is None  # replay while A is live: stale
+    p = feed(table, 1, 0, "B", 2.0)  # A silent for ~2 s, B starts over
     assert p is not None and p.result.k == 0 and table.counters.restarts == 1
 
 

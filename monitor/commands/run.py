@@ -4,85 +4,142 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["register"]
+__all__ = ["register", "add_model_arguments", "load_models"]
+
+
+def add_model_arguments(p: argparse.ArgumentParser, fleet: bool = True) -> None:
+    """The flags that say which plant, gains and signal map serve the vehicles (shared with ``analyse``)."""
+    p.add_argument("--plant", metavar="P", help="plant preset (paper, paper-continuous) or plant TOML file: the "
+                   "default model for every vehicle the fleet file does not list")
+    p.add_argument("--gains", metavar="GAINS.toml", help="gains file for --plant (from fault-monitor design)")
+    p.add_argument("--signals", metavar="FILE", help="signal map for --plant: a TOML file with a [signals] table "
+                   "naming the MAVLink fields of y, the actuator report and the command (default: the plant file's "
+                   "own [signals], else the contract's AOA_SSA / ATTITUDE / ACTUATOR_OUTPUT_STATUS mapping)")
+    p.add_argument("--force", action="store_true", help="run gains designed for another plant (hash mismatch)")
+    if fleet:
+        p.add_argument("--fleet", metavar="FLEET.toml",
+                       help="per-vehicle models: [vehicle.<sysid>] tables with plant, gains and optional signals")
+
+
+def load_models(args: argparse.Namespace):
+    """The fleet from ``--plant/--gains/--signals`` and ``--fleet``; one-line errors for what is missing."""
+    from monitor.errors import UserError
+    from monitor.service.vehicles import Fleet, load_fleet, load_model
+
+    fleet_file = getattr(args, "fleet", None)
+    if (args.plant is None) != (args.gains is None):
+        raise UserError("--plant and --gains go together")
+    if args.plant is None and fleet_file is None:
+        raise UserError("give --plant and --gains" + (", or --fleet FLEET.toml" if hasattr(args, "fleet") else ""))
+    if args.signals and args.plant is None:
+        raise UserError("--signals applies to --plant; in a fleet file give each vehicle a 'signals' key")
+    default = load_model(args.plant, args.gains, args.force, args.signals) if args.plant else None
+    return load_fleet(fleet_file, default, args.force) if fleet_file else Fleet(default)
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "run", help="the live monitor daemon: MAVLink in and out, estimates on Zenoh, optional .rrd recording",
         description=(
-            "Listen for vehicles' MAVLink telemetry, run the observer and the fault-tolerant controller for each "
-            "system id, answer with SET_ACTUATOR_CONTROL_TARGET, publish estimates and alarms on Zenoh "
-            "(<prefix>/<sysid>/fault/estimate|alarm, queryable <prefix>/<sysid>/fault/status, liveliness "
-            "<prefix>/monitor/<name>) and optionally record every sample to a Rerun .rrd. Stops on SIGINT/SIGTERM "
-            "with exit code 0 after flushing the recording."),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--plant", metavar="P", help="plant preset (paper, paper-continuous) or plant TOML file: the "
-                   "default model for every vehicle the fleet file does not list")
-    p.add_argument("--gains", metavar="GAINS.toml", help="gains file for --plant (from fault-monitor design)")
-    p.add_argument("--force", action="store_true", help="run gains designed for another plant (hash mismatch)")
-    p.add_argument("--fleet", metavar="FLEET.toml",
-                   help="per-vehicle models: [vehicle.<sysid>] tables with plant = ... and gains = ...")
-    p.add_argument("--mavlink", default="udpin:127.0.0.1:14550", metavar="udpin:HOST:PORT",
-                   help="where to listen for vehicles (commands go back to each sample's sender)")
-    p.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing key (32 raw bytes, 64 hex digits or a "
-                   "passphrase, as sim-vehicle): sign commands, reject unsigned or wrongly signed telemetry")
-    p.add_argument("--rrd", metavar="FILE", help="record every processed sample to this Rerun file")
-    p.add_argument("--name", help="monitor name in the liveliness key <prefix>/monitor/<name> (default: host-pid)")
-    p.add_argument("--no-truth", dest="truth", action="store_false",
-                   help="do not subscribe to <prefix>/*/truth (the simulator's ground truth, recorded beside f_hat)")
-    p.add_argument("--alarm-threshold", type=float, default=1.0, metavar="X",
-                   help="raise when max |f_hat| >= X (plant units) for --alarm-samples samples in a row")
-    p.add_argument("--alarm-clear", type=float, default=0.5, metavar="Y",
-                   help="clear when max |f_hat| < Y for --alarm-samples samples in a row")
-    p.add_argument("--alarm-samples", type=int, default=2, metavar="N", help="persistence of raise and clear")
-    p.add_argument("--vehicle-timeout", type=float, default=10.0, metavar="S",
-                   help="forget a vehicle (its estimator state) after S seconds of silence")
-    p.add_argument("--queue", type=int, default=10_000, metavar="N",
-                   help="Zenoh hand-off queue length; estimates beyond it are dropped (counted), never waited for")
+            "Receive vehicles' MAVLink telemetry (directly, or through MAVProxy, mavlink-router or an autopilot's "
+            "TCP port), assemble one sample per sampling instant and system id, run the observer and the "
+            "fault-tolerant controller, answer with SET_ACTUATOR_CONTROL_TARGET on the link the sample came from "
+            "(not with --observe), tell ground stations (NAMED_VALUE_FLOAT FHAT, STATUSTEXT on alarms), publish "
+            "estimates and alarms on Zenoh (<prefix>/<sysid>/fault/estimate|alarm, queryable "
+            "<prefix>/<sysid>/fault/status, liveliness <prefix>/monitor/<name>) and optionally record every "
+            "sample to a Rerun .rrd. Stops on SIGINT/SIGTERM with exit code 0 after flushing the recording."),
+        epilog="Example: fault-monitor run --plant paper-continuous --gains gains.toml "
+               "--mavlink udpin:127.0.0.1:14550 --rrd run.rrd")
+    add_model_arguments(p)
+    link = p.add_argument_group("MAVLink")
+    link.add_argument("--mavlink", action="append", default=None, metavar="CONN",
+                      help="a connection as MAVProxy writes it: udpin:HOST:PORT (listen), udpout:HOST:PORT (send to a "
+                      "router; the monitor's 1 Hz HEARTBEAT makes it route vehicles back), tcp:HOST:PORT (connect, "
+                      "reconnect), tcpin:HOST:PORT (listen). Repeatable. Default: udpin:127.0.0.1:14550")
+    link.add_argument("--observe", action="store_true",
+                      help="observe-only: the vehicle's own autopilot flies; send no commands, run the observer with "
+                      "the u(k) the vehicle reports in its actuator message")
+    link.add_argument("--no-gcs-feedback", dest="gcs_feedback", action="store_false",
+                      help="do not send NAMED_VALUE_FLOAT FHAT and alarm STATUSTEXT back on the vehicle's link")
+    link.add_argument("--assembly-wait", type=float, default=0.02, metavar="S",
+                      help="how long a sample that is otherwise complete waits for the vehicle's actuator report "
+                      "(seconds; default: 0.02)")
+    link.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing key (32 raw bytes, 64 hex digits or a "
+                      "passphrase, as sim-vehicle): sign what the monitor sends, refuse unsigned or wrongly signed "
+                      "telemetry")
+    out = p.add_argument_group("outputs and alarm")
+    out.add_argument("--rrd", metavar="FILE", help="record every processed sample to this Rerun file")
+    out.add_argument("--name", help="monitor name in the liveliness key <prefix>/monitor/<name> (default: host-pid)")
+    out.add_argument("--no-truth", dest="truth", action="store_false",
+                     help="do not subscribe to <prefix>/*/truth (the simulator's ground truth, recorded beside f_hat)")
+    out.add_argument("--alarm-threshold", type=float, default=1.0, metavar="X",
+                     help="raise when max |f_hat| >= X (plant units) for --alarm-samples samples in a row "
+                     "(default: 1.0)")
+    out.add_argument("--alarm-clear", type=float, default=0.5, metavar="Y",
+                     help="clear when max |f_hat| < Y for --alarm-samples samples in a row (default: 0.5)")
+    out.add_argument("--alarm-samples", type=int, default=2, metavar="N",
+                     help="persistence of raise and clear (default: 2)")
+    out.add_argument("--vehicle-timeout", type=float, default=10.0, metavar="S",
+                     help="forget a vehicle (its estimator state) after S seconds of silence (default: 10)")
+    out.add_argument("--queue", type=int, default=10_000, metavar="N",
+                     help="Zenoh hand-off queue length; estimates beyond it are dropped (counted), never waited for "
+                     "(default: 10000)")
     from monitor.wire.zenoh_session import add_zenoh_arguments
 
     add_zenoh_arguments(p)
     p.set_defaults(func=run)
 
 
+def _free_tcp_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 def run(args: argparse.Namespace) -> int:
     from monitor import __version__
     from monitor.errors import UserError
+    from monitor.link.transports import parse_connection
     from monitor.service.alarm import AlarmConfig
     from monitor.service.daemon import MonitorConfig, default_name, run_daemon
-    from monitor.service.udp_endpoint import parse_udpin
-    from monitor.service.vehicles import Fleet, load_fleet, load_model
     from monitor.wire.zenoh_session import config_from_args
 
-    if (args.plant is None) != (args.gains is None):
-        raise UserError("--plant and --gains go together")
-    if args.plant is None and args.fleet is None:
-        raise UserError("give --plant and --gains, or --fleet FLEET.toml")
     try:
         alarm = AlarmConfig(args.alarm_threshold, args.alarm_clear, args.alarm_samples)
     except ValueError as exc:
         raise UserError(str(exc)) from None
     if not args.vehicle_timeout > 0:
         raise UserError("--vehicle-timeout must be positive")
-    host, port = parse_udpin(args.mavlink)
-    default = load_model(args.plant, args.gains, args.force) if args.plant else None
-    fleet = load_fleet(args.fleet, default, args.force) if args.fleet else Fleet(default)
+    if args.queue < 1:
+        raise UserError("--queue must be at least 1")
+    if not 0 <= args.assembly_wait < 10:
+        raise UserError("--assembly-wait must be between 0 and 10 seconds")
+    connections = [parse_connection(c) for c in (args.mavlink or ["udpin:127.0.0.1:14550"])]
+    fleet = load_models(args)
     key = None
     if args.signing_key:
         from monitor.wire.signing_key import load_signing_key  # one key-file format for both ends
 
         key = load_signing_key(args.signing_key)
-    properties = {"monitor_version": __version__, "mavlink": args.mavlink, "key_prefix": args.key_prefix,
+    if not args.zenoh_listen and not args.zenoh_config and args.zenoh_mode != "client":
+        args.zenoh_listen = [f"tcp/127.0.0.1:{_free_tcp_port()}"]  # explicit, so the ready line can name it
+    endpoints = ", ".join([f"listen {e}" for e in args.zenoh_listen] + [f"connect {e}" for e in args.zenoh_connect])
+    properties = {"monitor_version": __version__, "mavlink": " ".join(str(c) for c in connections),
+                  "key_prefix": args.key_prefix, "mode": "observe" if args.observe else "control",
                   "alarm": f"threshold={alarm.threshold} clear={alarm.clear} samples={alarm.samples}"}
+    default = fleet.default
     if default is not None:
         properties.update(plant=default.plant.name, plant_hash=default.plant.digest, gains=str(args.gains),
-                          gains_method=default.gains.method,
+                          gains_method=default.gains.method, signals=default.signals.describe(),
                           **{f"gain_{n}": str(getattr(default.gains.gains, n).tolist()) for n in
                              ("L", "M", "K1", "K2", "K3")})
     if args.fleet:
         properties["fleet"] = str(args.fleet)
-    config = MonitorConfig(fleet=fleet, host=host, port=port, prefix=args.key_prefix, name=args.name or default_name(),
-                           rrd=args.rrd, rrd_properties=properties, signing_key=key, alarm=alarm,
-                           vehicle_timeout=args.vehicle_timeout, truth=args.truth, queue_max=args.queue)
+    config = MonitorConfig(fleet=fleet, connections=connections, prefix=args.key_prefix,
+                           name=args.name or default_name(), rrd=args.rrd, rrd_properties=properties,
+                           signing_key=key, alarm=alarm, vehicle_timeout=args.vehicle_timeout, truth=args.truth,
+                           queue_max=args.queue, observe=args.observe, gcs_feedback=args.gcs_feedback,
+                           assembly_wait=args.assembly_wait, zenoh_endpoints=endpoints)
     return run_daemon(config, config_from_args(args))

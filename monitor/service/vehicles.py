@@ -1,17 +1,19 @@
-"""The per-vehicle table: which plant and gains serve a system id, and each vehicle's loop state.
+"""The per-vehicle table: which plant, gains and signal map serve a system id, and each vehicle's loop.
 
-A vehicle appears on its first sample (its estimator state starts at zero), and is forgotten after
+A vehicle appears with its first message (its estimator state starts at zero) and is forgotten after
 ``timeout`` seconds of silence. Its model comes from the fleet config (TOML, one ``[vehicle.<sysid>]``
-table each with ``plant`` and ``gains``) or else from the default ``--plant``/``--gains``; a system id
-with neither is refused with one log line (and counted), never a crash.
+table each with ``plant``, ``gains`` and optionally ``signals``) or else from the default
+``--plant``/``--gains``; a system id with neither is refused with one log line (and counted).
 
-Why duplicates and stale samples are filtered here and not only in ``Estimator.step``: they must be
-counted separately (a duplicated datagram and a late, reordered one are different network faults), and
-neither may be processed twice. Why a "restart" rule: a vehicle process restarted under the same sysid
-comes from a new UDP source address and starts again at k = 0, which would otherwise look stale until
-the timeout; a new address whose sample goes backwards while the old address has been silent for
-``restart_silence`` seconds starts a fresh state. A replayed old datagram from another address while
-the vehicle is live does not qualify, so it is still refused as stale.
+Messages go to the vehicle's ``SampleAssembler`` (monitor/link/assembly.py), which hands back whole
+samples in order; duplicates and stale samples are counted there. Why a "restart" rule: a vehicle
+process restarted under the same sysid comes from a new source and starts again at a low k, which would
+otherwise look stale until the timeout; an instant message from a new route whose k goes backwards
+while the old route has been silent for ``restart_silence`` seconds starts a fresh state. A replayed
+old message from another address while the vehicle is live does not qualify and is still stale.
+
+Why a vehicle that never assembles a sample gets a WARNING: the most common set-up mistake is a signal
+map that names a message the vehicle does not send; a silent monitor would look like a network fault.
 """
 
 from __future__ import annotations
@@ -22,35 +24,41 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from monitor.errors import UserError
 from monitor.estimator import Estimator, EstimatorState, StepResult
 from monitor.gains import GainsFile, read_gains
+from monitor.link.assembly import AssembledSample, AssemblyCounters, SampleAssembler
+from monitor.link.signals import SignalMap, signals_for_plant
 from monitor.plant import Plant, load_plant
 from monitor.service.alarm import Alarm, AlarmConfig
 from monitor.service.delay import DelayTracker
-from monitor.service.udp_endpoint import Telemetry
 
 __all__ = ["VehicleModel", "Fleet", "load_model", "load_fleet", "Vehicle", "Processed", "TableCounters",
            "VehicleTable"]
 
 log = logging.getLogger(__name__)
 
+MISSING_WARNING_S = 3.0  # a vehicle heard for this long without one sample gets a WARNING (checked at 1 Hz)
+
 
 @dataclass(frozen=True, eq=False)
 class VehicleModel:
-    """A plant, its gains and the estimator built from them (shared by every vehicle that uses them)."""
+    """A plant, its gains, its signal map and the estimator built from them (shared between vehicles)."""
 
     plant: Plant
     gains: GainsFile
     estimator: Estimator
-    C_rows: tuple[tuple[float, float], ...]  # y = C [alpha; q] as Python floats: cheaper than numpy at 1x2
+    signals: SignalMap
 
     @property
     def h(self) -> float:
         return self.plant.h
 
 
-def load_model(plant_spec: str | Path, gains_path: str | Path, force: bool = False) -> VehicleModel:
+def load_model(plant_spec: str | Path, gains_path: str | Path, force: bool = False,
+               signals_file: str | Path | None = None) -> VehicleModel:
     """Load and cross-check a plant and its gains; a plant-hash mismatch is a UserError unless ``force``."""
     plant = load_plant(plant_spec)
     gains = read_gains(gains_path)
@@ -62,10 +70,8 @@ def load_model(plant_spec: str | Path, gains_path: str | Path, force: bool = Fal
         if not force:
             raise UserError(f"{what}; use --force to run it anyway")
         log.warning("%s; running anyway (--force)", what)
-    if plant.C.shape[1] != 2:
-        raise UserError(f"{plant_spec}: the MAVLink telemetry carries [alpha, q], so C must have 2 columns")
-    C_rows = tuple((float(r[0]), float(r[1])) for r in plant.C)
-    return VehicleModel(plant, gains, Estimator(plant, gains.gains), C_rows)
+    signals = signals_for_plant(plant, signals_file)
+    return VehicleModel(plant, gains, Estimator(plant, gains.gains), signals)
 
 
 class Fleet:
@@ -78,6 +84,9 @@ class Fleet:
     def model_for(self, sysid: int) -> VehicleModel | None:
         return self.by_sysid.get(sysid, self.default)
 
+    def models(self) -> list[VehicleModel]:
+        return [m for m in (self.default, *self.by_sysid.values()) if m is not None]
+
 
 def load_fleet(path: str | Path, default: VehicleModel | None, force: bool = False) -> Fleet:
     """Parse a fleet file::
@@ -85,8 +94,9 @@ def load_fleet(path: str | Path, default: VehicleModel | None, force: bool = Fal
         [vehicle.1]
         plant = "paper-continuous"
         gains = "gains/certified.toml"   # relative paths are relative to the fleet file
+        signals = "signals/roll.toml"    # optional: a [signals] table for this vehicle
 
-    Models are shared between vehicles that name the same plant and gains.
+    Models are shared between vehicles that name the same plant, gains and signals.
     """
     path = Path(path)
     try:
@@ -98,52 +108,62 @@ def load_fleet(path: str | Path, default: VehicleModel | None, force: bool = Fal
     unknown = sorted(set(raw) - {"vehicle"})
     if unknown:
         raise UserError(f"{path}: unknown table '{unknown[0]}' (expected [vehicle.<sysid>] tables)")
-    models: dict[tuple[str, str], VehicleModel] = {}
+    vehicles = raw.get("vehicle") or {}
+    if not isinstance(vehicles, dict):
+        raise UserError(f"{path}: 'vehicle' must be tables [vehicle.<sysid>], not a value")
+    models: dict[tuple[str, str, str | None], VehicleModel] = {}
     by_sysid: dict[int, VehicleModel] = {}
-    for name, entry in (raw.get("vehicle") or {}).items():
+    for name, entry in vehicles.items():
         where = f"{path}: [vehicle.{name}]"
         if not name.isdigit() or not 1 <= int(name) <= 255:
             raise UserError(f"{where}: the table name must be a MAVLink system id 1-255")
-        if not isinstance(entry, dict) or set(entry) != {"plant", "gains"}:
-            raise UserError(f"{where}: needs exactly the keys 'plant' and 'gains'")
-        plant_spec = str(entry["plant"])
+        if not isinstance(entry, dict) or not {"plant", "gains"} <= set(entry) <= {"plant", "gains", "signals"}:
+            raise UserError(f"{where}: needs the keys 'plant' and 'gains' (and optionally 'signals')")
+        if not all(isinstance(v, str) for v in entry.values()):
+            raise UserError(f"{where}: 'plant', 'gains' and 'signals' must be strings (a preset or a path)")
+        plant_spec = entry["plant"]
         if plant_spec.endswith(".toml"):
             plant_spec = str(path.parent / plant_spec)
-        gains_path = str(path.parent / str(entry["gains"]))
-        cache_key = (plant_spec, gains_path)
+        gains_path = str(path.parent / entry["gains"])
+        signals = str(path.parent / entry["signals"]) if "signals" in entry else None
+        cache_key = (plant_spec, gains_path, signals)
         if cache_key not in models:
-            models[cache_key] = load_model(plant_spec, gains_path, force)
+            models[cache_key] = load_model(plant_spec, gains_path, force, signals)
         by_sysid[int(name)] = models[cache_key]
     return Fleet(default, by_sysid)
 
 
 class Vehicle:
-    """One vehicle's loop: estimator state, alarm, observed delay, where to answer, what it last said."""
+    """One vehicle's loop: assembler, estimator state, alarm, observed delay, where to answer."""
 
-    __slots__ = ("sysid", "model", "state", "alarm", "delay", "peer", "last_seen", "processed", "duplicates",
-                 "stale", "skipped")
+    __slots__ = ("sysid", "model", "state", "alarm", "delay", "assembler", "route", "last_seen", "first_seen",
+                 "processed", "skipped", "warned_missing", "last_command", "no_report")
 
-    def __init__(self, sysid: int, model: VehicleModel, alarm: AlarmConfig, peer: object, now: float) -> None:
+    def __init__(self, sysid: int, model: VehicleModel, alarm: AlarmConfig, route: object, now: float,
+                 observe: bool, wait_s: float) -> None:
         self.sysid = sysid
         self.model = model
         self.state: EstimatorState = model.estimator.initial_state()
         self.alarm = Alarm(alarm)
         self.delay = DelayTracker()
-        self.peer = peer
-        self.last_seen = now
-        self.processed = self.duplicates = self.stale = self.skipped = 0
+        self.assembler = SampleAssembler(model.signals, model.plant.h, observe=observe, wait_s=wait_s)
+        self.route = route
+        self.last_seen = self.first_seen = now
+        self.processed = self.skipped = self.no_report = 0
+        self.warned_missing = False
+        self.last_command: np.ndarray | None = None
 
 
 @dataclass
 class TableCounters:
     processed: int = 0
-    duplicates: int = 0
-    stale: int = 0
     skipped: int = 0  # samples never received, predicted over by the estimator
-    refused: int = 0  # samples from system ids with no model
+    refused: int = 0  # samples (instant messages) from system ids with no model
     vehicles_seen: int = 0
     vehicles_expired: int = 0
     restarts: int = 0
+    no_report: int = 0  # samples without an actuator report: u(k-1) = the monitor's own last command
+    resets: int = 0  # estimator states that became non-finite and were reset
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -152,90 +172,165 @@ class TableCounters:
 class Processed:
     """The outcome of one processed sample, for the reply, the publishers and the recorder."""
 
-    __slots__ = ("vehicle", "result", "t", "tau_obs", "alarm_event", "f_mag")
+    __slots__ = ("vehicle", "sample", "result", "t", "y", "tau_obs", "alarm_event", "f_mag")
 
-    def __init__(self, vehicle: Vehicle, result: StepResult, t: float, tau_obs: float | None,
-                 alarm_event: str | None, f_mag: float) -> None:
+    def __init__(self, vehicle: Vehicle, sample: AssembledSample, result: StepResult, t: float, y: list[float],
+                 tau_obs: float | None, alarm_event: str | None, f_mag: float) -> None:
         self.vehicle = vehicle
+        self.sample = sample
         self.result = result
         self.t = t
+        self.y = y
         self.tau_obs = tau_obs
         self.alarm_event = alarm_event
         self.f_mag = f_mag
 
 
 class VehicleTable:
-    """Routes telemetry to each vehicle's estimator; the only place that creates or drops vehicles."""
+    """Routes messages to each vehicle's assembler and samples to its estimator; creates and drops vehicles."""
 
-    def __init__(self, fleet: Fleet, alarm: AlarmConfig, timeout: float = 10.0, restart_silence: float = 1.0) -> None:
+    def __init__(self, fleet: Fleet, alarm: AlarmConfig, timeout: float = 10.0, restart_silence: float = 1.0,
+                 observe: bool = False, wait_s: float = 0.02) -> None:
         self.fleet = fleet
         self.alarm = alarm
         self.timeout = timeout
         self.restart_silence = min(restart_silence, timeout)
+        self.observe = observe
+        self.wait_s = wait_s
         self.vehicles: dict[int, Vehicle] = {}
         self.counters = TableCounters()
         self._refused_logged: set[int] = set()
+        self._instants = {m.signals.instant for m in fleet.models()}
+        self._retired: list[Vehicle] = []  # assembly counts of restarted and expired vehicles, for the summary
 
-    def _create(self, sysid: int, peer: object, now: float) -> Vehicle | None:
+    def _create(self, sysid: int, name: str, route: object, now: float) -> Vehicle | None:
         model = self.fleet.model_for(sysid)
         if model is None:
-            self.counters.refused += 1
+            if name in self._instants:  # counted once per sample, not once per message
+                self.counters.refused += 1
             if sysid not in self._refused_logged:
                 self._refused_logged.add(sysid)
                 log.warning("refusing vehicle sysid %d from %s: no plant/gains for it (fleet file or --plant/--gains)",
-                            sysid, peer)
+                            sysid, _where(route))
             return None
-        vehicle = self.vehicles[sysid] = Vehicle(sysid, model, self.alarm, peer, now)
+        vehicle = self.vehicles[sysid] = Vehicle(sysid, model, self.alarm, route, now, self.observe, self.wait_s)
         self.counters.vehicles_seen += 1
-        log.info("vehicle sysid %d from %s: new estimator (plant %s)", sysid, peer, model.plant.name)
+        log.info("vehicle sysid %d from %s: new estimator (plant %s; %s)", sysid, _where(route), model.plant.name,
+                 model.signals.describe())
         return vehicle
 
-    def accept(self, tel: Telemetry, peer: object, now: float, wall: float) -> Processed | None:
-        """Process one sample unless it is a duplicate, stale, or from a refused vehicle (then None)."""
-        vehicle = self.vehicles.get(tel.sysid)
+    def message(self, sysid: int, name: str, values: tuple, route: object, now: float) -> list[tuple[Vehicle, AssembledSample]]:
+        """File one decoded message; returns the samples it completed (oldest first)."""
+        vehicle = self.vehicles.get(sysid)
         if vehicle is None:
-            vehicle = self._create(tel.sysid, peer, now)
+            vehicle = self._create(sysid, name, route, now)
             if vehicle is None:
-                return None
-        model = vehicle.model
-        h = model.plant.h
-        k = int(round(tel.time_usec / (h * 1e6)))
-        k_last = vehicle.state.k_last
-        if k_last is not None and k <= k_last:
-            if peer != vehicle.peer and now - vehicle.last_seen >= self.restart_silence and k < k_last:
-                log.info("vehicle sysid %d restarted (new peer %s, k %d -> %d): fresh estimator",
-                         tel.sysid, peer, k_last, k)
+                return []
+        asm = vehicle.assembler
+        if (name == asm.signals.instant and route != vehicle.route and asm.last_k is not None
+                and now - vehicle.last_seen >= self.restart_silence):
+            k = int(round(int(values[asm.signals.time_fields[name][0]]) / asm.h_us))
+            if k < asm.last_k:
+                log.info("vehicle sysid %d restarted (new source %s, k %d -> %d): fresh estimator",
+                         sysid, _where(route), asm.last_k, k)
                 self.counters.restarts += 1
-                del self.vehicles[tel.sysid]
-                return self.accept(tel, peer, now, wall)
-            if k == k_last:
-                vehicle.duplicates += 1
-                self.counters.duplicates += 1
-            else:
-                vehicle.stale += 1
-                self.counters.stale += 1
-            return None
-        vehicle.peer = peer
+                self._retire(sysid)
+                return self.message(sysid, name, values, route, now)
         vehicle.last_seen = now
-        a, q = tel.alpha_deg, tel.q_deg_s
-        y = [c0 * a + c1 * q for c0, c1 in model.C_rows]
-        result = model.estimator.step(vehicle.state, k, y)
+        ready = asm.add(name, values, route, now)
+        return [(vehicle, s) for s in ready]
+
+    def poll(self, now: float) -> list[tuple[Vehicle, AssembledSample]]:
+        """Samples whose bounded wait for an actuator report has run out."""
+        out: list[tuple[Vehicle, AssembledSample]] = []
+        for v in self.vehicles.values():
+            if v.assembler.pending_instants():
+                out.extend((v, s) for s in v.assembler.poll(now))
+        return out
+
+    def flush(self, now: float) -> list[tuple[Vehicle, AssembledSample]]:
+        out: list[tuple[Vehicle, AssembledSample]] = []
+        for v in self.vehicles.values():
+            out.extend((v, s) for s in v.assembler.flush(now))
+        return out
+
+    def process(self, vehicle: Vehicle, sample: AssembledSample, wall: float) -> Processed:
+        """Step the vehicle's estimator on one assembled sample (control or observe-only)."""
+        model = vehicle.model
+        sig = model.signals
+        values = sample.values
+        y = [values[name] for name in sig.outputs]
+        report = [values[name] for name in sig.actuator if name in values]
+        u_report = report if len(report) == len(sig.actuator) else None
+        est = model.estimator
+        if self.observe:
+            # u(k) issued by the vehicle is in this sample's report; u(k-1) stays from the previous one
+            result = est.observe(vehicle.state, sample.k, y, u_report)
+        else:
+            if u_report is None:
+                vehicle.no_report += 1
+                self.counters.no_report += 1
+            result = est.step(vehicle.state, sample.k, y, u_prev=u_report)
+            vehicle.last_command = result.u
+        if result.reset:
+            self.counters.resets += 1
+            log.error("vehicle sysid %d: estimator state became non-finite at k=%d; reset to zero", vehicle.sysid,
+                      sample.k)
+        vehicle.route = sample.route
         vehicle.processed += 1
         self.counters.processed += 1
         if result.skipped:
             vehicle.skipped += result.skipped
             self.counters.skipped += result.skipped
-        t = k * h
+        t = sample.time_usec * 1e-6
         f_mag = max(abs(float(f)) for f in result.f_hat)
         event = vehicle.alarm.update(f_mag)
         tau_obs = vehicle.delay.update(t, wall)
-        return Processed(vehicle, result, t, tau_obs, event, f_mag)
+        return Processed(vehicle, sample, result, t, y, tau_obs, event, f_mag)
+
+    def _retire(self, sysid: int) -> Vehicle:
+        v = self.vehicles.pop(sysid)
+        self._retired.append(v)
+        return v
+
+    def assembly_totals(self) -> dict[str, int]:
+        totals = AssemblyCounters().as_dict()
+        for v in (*self._retired, *self.vehicles.values()):
+            for key, value in v.assembler.counters.as_dict().items():
+                totals[key] += value
+        return totals
 
     def expire(self, now: float) -> list[int]:
         """Drop vehicles silent for ``timeout`` seconds; returns their system ids."""
         gone = [s for s, v in self.vehicles.items() if now - v.last_seen > self.timeout]
         for sysid in gone:
-            v = self.vehicles.pop(sysid)
+            v = self._retire(sysid)
             self.counters.vehicles_expired += 1
             log.info("vehicle sysid %d silent for %.1f s: dropped after %d samples", sysid, self.timeout, v.processed)
         return gone
+
+    def warn_missing(self, now: float) -> list[int]:
+        """One WARNING per vehicle heard for a while whose messages never made a sample: what is missing."""
+        warned = []
+        for v in self.vehicles.values():
+            if v.processed or v.warned_missing or now - v.first_seen < MISSING_WARNING_S:
+                continue
+            asm = v.assembler
+            missing = [m for m in asm.signals.messages(self.observe) if m not in asm.seen]
+            if not missing and asm.expect_actuator:
+                missing = [m for m in asm.signals.actuator_messages() if m not in asm.seen]
+            what = (f"missing {', '.join(missing)}" if missing else
+                    "its messages never share a sampling instant (check the time fields)")
+            log.warning("vehicle sysid %d: telemetry arrives (%s) but never becomes a sample: %s (signal map: %s)",
+                        v.sysid, ", ".join(sorted(asm.seen)) or "nothing the signal map uses", what,
+                        asm.signals.describe())
+            v.warned_missing = True
+            warned.append(v.sysid)
+        return warned
+
+
+def _where(route: object) -> str:
+    if isinstance(route, tuple) and len(route) == 2:
+        link, peer = route
+        return f"{link} peer {peer}"
+    return str(route)

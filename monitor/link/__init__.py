@@ -1,0 +1,15 @@
+"""The monitor's MAVLink link layer, one step per module, so a reader sees where a byte becomes a sample.
+
+    transports  bytes in/out per link and peer (udpin, udpout, tcp, tcpin; a tlog file in ``tlog``)
+        |
+    frames      one parser per stream (partial frames kept across reads) or per datagram; CRC and
+        |       signature (``signing``) checked; every reject counted
+    signals     the signal map: which MESSAGE.field[index] is each plant output, the actuator report,
+        |       the command channel, and which message defines the sampling instant
+    assembly    per vehicle, parts of one sampling instant gathered into one sample, bounded waiting
+        |
+    monitor.service.vehicles -> monitor.estimator   (the vehicle table and eqs. (5)-(6))
+
+``fault-monitor run`` and ``fault-monitor analyse`` share everything from ``frames`` down; the only
+difference is whether a command goes back (``monitor.service.pipeline``).
+"""

@@ -1,0 +1,257 @@
+"""The signal map: which MAVLink values are the plant's outputs, its actuator, its command and its instant.
+
+A ``[signals]`` table in the plant file, or a file of its own (``--signals FILE``, same table)::
+
+    [signals]
+    instant = "AOA_SSA"                    # the message whose time field defines sample k
+    outputs = ["alpha"]                    # y_1 .. y_l, in the order of the plant's C rows
+    actuator = ["elevator"]                # u_1 .. u_m as the vehicle reports them
+    record = ["alpha", "q", "elevator"]    # recorded as /vehicle/<id>/measured/<name> (default: all)
+
+    [signals.measured]                     # name = { field = "MESSAGE.field[index]", scale, unit }
+    alpha = { field = "AOA_SSA.AOA", unit = "deg" }
+    q = { field = "ATTITUDE.pitchspeed", scale = 57.29577951308232, unit = "deg/s" }
+    elevator = { field = "ACTUATOR_OUTPUT_STATUS.actuator[0]", unit = "deg" }
+
+    [signals.command]                      # what the monitor sends (run without --observe)
+    message = "SET_ACTUATOR_CONTROL_TARGET"
+    channels = [1]                         # controls[] index of u_1 .. u_m
+    full_scale = [30.0]                    # plant units per normalised unit (controls are in [-1, 1])
+    group = 0
+
+A value in plant units is ``scale * MESSAGE.field[index]``. Each message used must carry ``time_usec``
+or ``time_boot_ms``: that is how parts of one sampling instant are matched (contract: AOA_SSA's
+``time_usec`` is the instant, ATTITUDE matches by ``time_boot_ms``, ACTUATOR_OUTPUT_STATUS by
+``time_usec``). Anything unknown (a message, a field, an index, a key) is a one-line error naming it.
+
+Why names and not just a list of fields: the recording and the replay report read signals by name
+(``alpha`` gives ``peak_alpha``), and a second airframe names its own.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from monitor.errors import UserError
+from monitor.link.dialect import MessageLayout, layout_by_name
+
+__all__ = ["Signal", "CommandMap", "SignalMap", "DEFAULT_SIGNALS_TOML", "default_signal_map", "parse_signals",
+           "load_signals_file", "signals_for_plant"]
+
+DEFAULT_SIGNALS_TOML = """
+[signals]
+instant = "AOA_SSA"
+outputs = ["alpha"]
+actuator = ["elevator"]
+
+[signals.measured]
+alpha = { field = "AOA_SSA.AOA", unit = "deg" }
+q = { field = "ATTITUDE.pitchspeed", scale = 57.29577951308232, unit = "deg/s" }
+elevator = { field = "ACTUATOR_OUTPUT_STATUS.actuator[0]", unit = "deg" }
+
+[signals.command]
+message = "SET_ACTUATOR_CONTROL_TARGET"
+channels = [1]
+full_scale = [30.0]
+group = 0
+"""
+
+_TOP_KEYS = {"instant", "outputs", "actuator", "record", "measured", "command"}
+_SIGNAL_KEYS = {"field", "scale", "unit"}
+_COMMAND_KEYS = {"message", "channels", "full_scale", "group"}
+_COMMAND_MESSAGES = {"SET_ACTUATOR_CONTROL_TARGET": ("controls", 8)}
+
+
+@dataclass(frozen=True)
+class Signal:
+    """One measured value: ``scale * message.field[index]`` in ``unit``."""
+
+    name: str
+    message: str
+    field: str
+    index: int
+    position: int  # flat position in the message's unpacked payload
+    scale: float
+    unit: str
+
+
+@dataclass(frozen=True)
+class CommandMap:
+    message: str
+    channels: tuple[int, ...]
+    full_scale: tuple[float, ...]
+    group: int
+
+
+@dataclass(frozen=True)
+class SignalMap:
+    """A validated signal map for a plant with ``l`` outputs and ``m`` inputs."""
+
+    instant: str
+    measured: dict[str, Signal]
+    outputs: tuple[str, ...]
+    actuator: tuple[str, ...]
+    record: tuple[str, ...]
+    command: CommandMap
+    time_fields: dict[str, tuple[int, int]]  # message -> (flat position of its time field, us per unit)
+    source: str
+
+    def messages(self, observe: bool) -> tuple[str, ...]:
+        """Every message whose parts make one sample (the instant first): what the estimator cannot do without."""
+        names = [self.instant] + [self.measured[s].message for s in self.outputs]
+        if observe:
+            names += [self.measured[s].message for s in self.actuator]
+        return tuple(dict.fromkeys(names))
+
+    def actuator_messages(self) -> tuple[str, ...]:
+        return tuple(dict.fromkeys(self.measured[s].message for s in self.actuator))
+
+    def describe(self) -> str:
+        outs = ", ".join(f"y{i}={self.measured[s].message}.{self.measured[s].field}" for i, s in enumerate(self.outputs))
+        return f"instant {self.instant}; {outs}"
+
+
+def _field_ref(text: Any, where: str) -> tuple[MessageLayout, str, int]:
+    if not isinstance(text, str) or "." not in text:
+        raise UserError(f"{where}: expected 'MESSAGE.field' or 'MESSAGE.field[index]', got {text!r}")
+    message, _, rest = text.partition(".")
+    layout = layout_by_name(message)
+    if layout is None:
+        raise UserError(f"{where}: unknown MAVLink message '{message}' (ardupilotmega dialect)")
+    field, index = rest, 0
+    if rest.endswith("]") and "[" in rest:
+        field, _, idx = rest[:-1].partition("[")
+        if not idx.isdigit():
+            raise UserError(f"{where}: bad index in '{text}'")
+        index = int(idx)
+    try:
+        layout.position(field, index)
+    except ValueError as exc:
+        raise UserError(f"{where}: {exc}") from None
+    return layout, field, index
+
+
+def _names(raw: dict, key: str, where: str, measured: dict[str, Signal], default: list | None = None) -> tuple[str, ...]:
+    value = raw.get(key, default)
+    if value is None:
+        raise UserError(f"{where}: missing key '{key}'")
+    if isinstance(value, str):
+        value = [value]
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise UserError(f"{where}: '{key}' must be a list of signal names")
+    for name in value:
+        if name not in measured:
+            raise UserError(f"{where}: '{key}' names '{name}', which is not in [signals.measured]")
+    return tuple(value)
+
+
+def _number_list(value: Any, n: int, where: str, key: str, kind: type) -> tuple:
+    if not isinstance(value, list):
+        value = [value]
+    if len(value) != n or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        raise UserError(f"{where}: '{key}' must be a list of {n} number(s), one per plant input")
+    return tuple(kind(v) for v in value)
+
+
+def parse_signals(raw: Any, source: str, outputs: int, inputs: int) -> SignalMap:
+    """Validate a ``[signals]`` table for a plant with ``outputs`` rows of C and ``inputs`` inputs."""
+    where = f"{source}: [signals]"
+    if not isinstance(raw, dict):
+        raise UserError(f"{where}: must be a table")
+    unknown = sorted(set(raw) - _TOP_KEYS)
+    if unknown:
+        raise UserError(f"{where}: unknown key '{unknown[0]}' (known: {', '.join(sorted(_TOP_KEYS))})")
+    measured: dict[str, Signal] = {}
+    time_fields: dict[str, tuple[int, int]] = {}
+    table = raw.get("measured")
+    if not isinstance(table, dict) or not table:
+        raise UserError(f"{where}: needs a [signals.measured] table of name = {{ field = ... }}")
+    for name, spec in table.items():
+        w = f"{where} measured.{name}"
+        if not isinstance(spec, dict):
+            spec = {"field": spec}
+        bad = sorted(set(spec) - _SIGNAL_KEYS)
+        if bad:
+            raise UserError(f"{w}: unknown key '{bad[0]}' (known: field, scale, unit)")
+        layout, field, index = _field_ref(spec.get("field"), w)
+        scale = spec.get("scale", 1.0)
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale == 0:
+            raise UserError(f"{w}: 'scale' must be a finite non-zero number")
+        stamp = layout.time_field()
+        if stamp is None:
+            raise UserError(f"{w}: {layout.name} has no time_usec or time_boot_ms to match it to a sampling instant")
+        time_fields[layout.name] = (layout.position(stamp[0]), stamp[1])
+        measured[name] = Signal(name, layout.name, field, index, layout.position(field, index), float(scale),
+                                str(spec.get("unit", "")))
+    instant = raw.get("instant")
+    instant_layout = layout_by_name(instant) if isinstance(instant, str) else None
+    if instant_layout is None:
+        raise UserError(f"{where}: 'instant' must name a MAVLink message, got {instant!r}")
+    stamp = instant_layout.time_field()
+    if stamp is None or stamp[0] != "time_usec":
+        raise UserError(f"{where}: the instant message {instant_layout.name} needs a time_usec field")
+    time_fields[instant_layout.name] = (instant_layout.position("time_usec"), 1)
+    outs = _names(raw, "outputs", where, measured)
+    if len(outs) != outputs:
+        raise UserError(f"{where}: 'outputs' names {len(outs)} signal(s) but the plant has {outputs} output(s) (rows of C)")
+    act = _names(raw, "actuator", where, measured)
+    if len(act) != inputs:
+        raise UserError(f"{where}: 'actuator' names {len(act)} signal(s) but the plant has {inputs} input(s)")
+    record = _names(raw, "record", where, measured, default=list(measured))
+    cmd = raw.get("command", {})
+    if not isinstance(cmd, dict):
+        raise UserError(f"{where}: 'command' must be a table")
+    bad = sorted(set(cmd) - _COMMAND_KEYS)
+    if bad:
+        raise UserError(f"{where} command: unknown key '{bad[0]}' (known: {', '.join(sorted(_COMMAND_KEYS))})")
+    message = str(cmd.get("message", "SET_ACTUATOR_CONTROL_TARGET")).upper()
+    if message not in _COMMAND_MESSAGES:
+        raise UserError(f"{where} command: message '{message}' is not supported (use SET_ACTUATOR_CONTROL_TARGET)")
+    width = _COMMAND_MESSAGES[message][1]
+    channels = _number_list(cmd.get("channels", [1] * inputs), inputs, f"{where} command", "channels", int)
+    if any(not 0 <= ch < width for ch in channels):
+        raise UserError(f"{where} command: channels must be in 0..{width - 1}")
+    full_scale = _number_list(cmd.get("full_scale", [30.0] * inputs), inputs, f"{where} command", "full_scale", float)
+    if any(not (math.isfinite(s) and s > 0) for s in full_scale):
+        raise UserError(f"{where} command: full_scale must be positive")
+    group = cmd.get("group", 0)
+    if isinstance(group, bool) or not isinstance(group, int) or not 0 <= group <= 255:
+        raise UserError(f"{where} command: group must be an integer 0-255")
+    return SignalMap(instant_layout.name, measured, outs, act, record, CommandMap(message, channels, full_scale, group),
+                     time_fields, source)
+
+
+def default_signal_map(outputs: int = 1, inputs: int = 1) -> SignalMap:
+    """The contract's mapping (alpha, q, elevator) for the paper's aircraft."""
+    return parse_signals(tomllib.loads(DEFAULT_SIGNALS_TOML)["signals"], "default signal map", outputs, inputs)
+
+
+def load_signals_file(path: str | Path, outputs: int, inputs: int) -> SignalMap:
+    """A TOML file holding a ``[signals]`` table (a plant file with one works too)."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text("utf-8"))
+    except FileNotFoundError:
+        raise UserError(f"{path}: signal map file not found") from None
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise UserError(f"{path}: cannot read signal map: {exc}") from None
+    if "signals" not in raw:
+        raise UserError(f"{path}: no [signals] table")
+    return parse_signals(raw["signals"], str(path), outputs, inputs)
+
+
+def signals_for_plant(plant, signals_file: str | Path | None = None) -> SignalMap:
+    """``--signals FILE`` if given, else the plant file's own ``[signals]`` table, else the default."""
+    if signals_file is not None:
+        return load_signals_file(signals_file, plant.l, plant.m)
+    raw = getattr(plant, "signals", None)
+    if raw is not None:
+        return parse_signals(raw, plant.name, plant.l, plant.m)
+    if plant.l != 1 or plant.m != 1:
+        raise UserError(f"plant {plant.name}: has {plant.l} output(s) and {plant.m} input(s); the default signal map "
+                        "is for 1 and 1 (alpha, elevator): give a [signals] table or --signals FILE")
+    return default_signal_map()

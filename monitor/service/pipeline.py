@@ -1,0 +1,160 @@
+"""From frames to answers: the one path ``fault-monitor run`` and ``fault-monitor analyse`` share.
+
+``on_frames(route, frames, t0)`` is called by a link (or the tlog reader) with the frames of one read:
+each frame the signal maps use is unpacked and filed with its vehicle's assembler
+(``VehicleTable.message``); each completed sample steps the estimator (``VehicleTable.process``) and
+then, in this order: the command goes back on the route the sample came from (not in observe-only
+mode), the ground-station feedback (``FHAT`` every sample, ``STATUSTEXT`` on alarm events) follows it,
+the estimate is handed to the Zenoh thread and the record to the recorder. Nothing on this path waits
+for I/O other than a non-blocking send. Processing time is measured from the moment the bytes were read
+to the end of the hand-offs.
+
+``analyse`` passes ``route=None`` (nothing to answer) and the log's own times as ``now``/``wall``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import deque
+from dataclasses import dataclass, fields
+
+from monitor.link.dialect import MessageLayout, layout_by_name, mavlink
+from monitor.link.frames import FrameCounters, RawFrame
+from monitor.link.outgoing import alarm_text_frame, command_frame, fhat_frames
+from monitor.service.records import SampleRecord
+from monitor.service.vehicles import Processed, Vehicle, VehicleTable
+
+__all__ = ["Pipeline", "MessageCounters", "percentile"]
+
+log = logging.getLogger("monitor.run")
+
+_HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
+
+
+def percentile(values, p: float) -> float | None:
+    data = sorted(values)
+    if not data:
+        return None
+    return data[min(len(data) - 1, int(round(p / 100 * (len(data) - 1))))]
+
+
+@dataclass
+class MessageCounters:
+    heartbeats: int = 0
+    foreign: int = 0  # valid messages no signal map uses (routers forward plenty of them)
+
+    def as_dict(self) -> dict[str, int]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+class Pipeline:
+    """Frames -> vehicle table -> estimator -> command, feedback, Zenoh, recorder."""
+
+    def __init__(self, table: VehicleTable, *, send_commands: bool = True, gcs_feedback: bool = True,
+                 publisher=None, recorder=None) -> None:
+        self.table = table
+        self.send_commands = send_commands and not table.observe
+        self.gcs_feedback = gcs_feedback
+        self.publisher = publisher
+        self.recorder = recorder
+        self.frames = FrameCounters()
+        self.messages = MessageCounters()
+        self.processing_s: deque[float] = deque(maxlen=100_000)
+        self.commands_sent = 0
+        self.feedback_sent = 0
+        self._wanted: dict[int, tuple[str, MessageLayout]] = {}
+        for model in table.fleet.models():
+            for name in {model.signals.instant, *(s.message for s in model.signals.measured.values())}:
+                layout = layout_by_name(name)
+                self._wanted[layout.msgid] = (layout.name, layout)
+
+    # --- hot path ------------------------------------------------------------------------------------
+    def on_frames(self, route: object, frames: list[RawFrame], t0_ns: int, now: float | None = None,
+                  wall: float | None = None) -> None:
+        if now is None:
+            now = time.monotonic()
+        if wall is None:
+            wall = time.time()
+        wanted = self._wanted
+        for msgid, sysid, _compid, payload in frames:
+            entry = wanted.get(msgid)
+            if entry is None:
+                if msgid == _HEARTBEAT:
+                    self.messages.heartbeats += 1
+                else:
+                    self.messages.foreign += 1
+                continue
+            name, layout = entry
+            for vehicle, sample in self.table.message(sysid, name, layout.decode(payload), route, now):
+                self._handle(vehicle, sample, wall, t0_ns)
+
+    def poll(self, now: float | None = None, wall: float | None = None) -> None:
+        """Process samples whose wait for an actuator report ran out (called every few ms by the daemon)."""
+        for vehicle, sample in self.table.poll(time.monotonic() if now is None else now):
+            self._handle(vehicle, sample, time.time() if wall is None else wall, time.perf_counter_ns())
+
+    def flush(self, now: float, wall: float) -> None:
+        """End of input (a log): process every sample still waiting for its actuator report."""
+        for vehicle, sample in self.table.flush(now):
+            self._handle(vehicle, sample, wall, time.perf_counter_ns())
+
+    def _handle(self, vehicle: Vehicle, sample, wall: float, t0_ns: int) -> None:
+        p = self.table.process(vehicle, sample, wall)
+        r = p.result
+        route = sample.route
+        if route is not None:
+            link, peer = route
+            if self.send_commands:
+                link.send(command_frame(link.encoder, vehicle.model.signals.command, vehicle.sysid, sample.time_usec,
+                                        r.u), peer)
+                self.commands_sent += 1
+            if self.gcs_feedback:
+                frames = fhat_frames(link.encoder, sample.time_usec, r.f_hat)
+                if p.alarm_event is not None:
+                    frames += alarm_text_frame(link.encoder, vehicle.sysid, p.alarm_event, p.f_mag,
+                                               vehicle.model.plant.unit)
+                link.send(frames, peer)
+                self.feedback_sent += 1
+        raised = vehicle.alarm.raised
+        if self.publisher is not None:
+            self.publisher.estimate((vehicle.sysid, r.k, p.t, r.f_hat, r.x_hat, r.residual, r.u, p.tau_obs, raised))
+            if p.alarm_event is not None:
+                self.publisher.alarm(vehicle.sysid, r.k, p.t, p.alarm_event, r.f_hat)
+        if p.alarm_event is not None:
+            log.info("vehicle %d: alarm %s at k=%d (|f_hat| = %.3g %s)", vehicle.sysid, p.alarm_event, r.k, p.f_mag,
+                     vehicle.model.plant.unit)
+        processing = (time.perf_counter_ns() - t0_ns) * 1e-9
+        self.processing_s.append(processing)
+        if self.recorder is not None:
+            self.recorder.submit(self._record(p, wall, processing))
+
+    @staticmethod
+    def _record(p: Processed, wall: float, processing: float) -> SampleRecord:
+        r, values = p.result, p.sample.values
+        sig = p.vehicle.model.signals
+        elevator = values.get(sig.actuator[0]) if sig.actuator else None
+        return SampleRecord(sysid=p.vehicle.sysid, k=r.k, t=p.t, wall=wall, y=p.y, alpha=values.get("alpha"),
+                            q=values.get("q"), elevator=elevator, x_hat=r.x_hat.tolist(), f_hat=r.f_hat.tolist(),
+                            u=r.u.tolist(), residual=r.residual.tolist(), tau_obs=p.tau_obs, processing_s=processing,
+                            alarm=p.vehicle.alarm.raised)
+
+    # --- housekeeping and reporting -----------------------------------------------------------------
+    def counts(self) -> dict[str, int]:
+        out = {**self.frames.as_dict(), **self.messages.as_dict(), **self.table.assembly_totals(),
+               **self.table.counters.as_dict(), "commands": self.commands_sent, "feedback": self.feedback_sent}
+        if self.publisher is not None:
+            out.update(published=self.publisher.published, publish_drops=self.publisher.dropped)
+        return out
+
+    def summary(self) -> str:
+        c = self.counts()
+        p50, p99 = percentile(self.processing_s, 50), percentile(self.processing_s, 99)
+        timing = (f"processing p50 {p50 * 1e6:.0f} us, p99 {p99 * 1e6:.0f} us" if p50 is not None
+                  else "no processing times")
+        order = ("processed", "duplicates", "stale", "incomplete", "late_parts", "waited_out", "no_report", "garbage",
+                 "truncated", "bad_signature", "wrong_dialect", "foreign", "refused", "skipped", "vehicles_seen",
+                 "restarts", "resets", "commands", "feedback", "published", "publish_drops")
+        names = {"processed": "samples processed", "vehicles_seen": "vehicles"}
+        parts = [f"{names.get(key, key.replace('_', ' '))} {c[key]}" for key in order if key in c]
+        return ", ".join(parts) + f"; {timing}"
