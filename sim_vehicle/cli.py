@@ -73,6 +73,10 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--sensor-noise", default=0.0, type=float, metavar="SIGMA",
                    help="white noise added to the measured alpha and q, plant units (default: 0)")
     g.add_argument("--x0", default=None, metavar="A,Q", help="initial state (default: 0)")
+    g.add_argument("--autopilot", default=None, metavar="K",
+                   help="fly with an on-board static gain u(k) = K y(k) (comma-separated, one per output), issued "
+                   "at sample k, reported in that sample's ACTUATOR_OUTPUT_STATUS and applied after the drawn delay; "
+                   "commands from outside are ignored. For observe-only monitoring (fault-monitor run --observe)")
     n = run.add_argument_group("network (emulated on top of the real UDP path)")
     n.add_argument("--delay", default=None, metavar="SPEC",
                    help="total sensor->actuator delay in simulated seconds (default: uniform:0:0.46 for h = 1 s, "
@@ -125,6 +129,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             plant=settings.plant, sink=None, sysid=settings.sysid, steps=settings.steps,  # type: ignore[arg-type]
             fault=settings.fault, delay=settings.delay, wind=settings.wind, impairment=settings.impairment,
             delay_split=settings.delay_split, sensor_noise=settings.sensor_noise, seed=settings.seed, x0=settings.x0,
+            autopilot=settings.autopilot,
         )
         log.info("plant %s, fault %s, delay %s, wind %s, truth on %s", settings.plant.name, settings.fault,
                  settings.delay, args.wind, truth_key if session is not None else "(no zenoh)")

@@ -20,6 +20,8 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from monitor.errors import UserError
 from monitor.plant import Plant, load_plant
 from monitor.wire.specs import DelaySampler, FaultSchedule, parse_delay_spec, parse_fault_spec
@@ -47,6 +49,7 @@ class Settings:
     x0: list[float] | None
     target: tuple[str, int]
     bind: tuple[str, int]
+    autopilot: np.ndarray | None = None
 
 
 def apply_config_file(parser: argparse.ArgumentParser, path: str) -> None:
@@ -140,4 +143,19 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
         x0=x0,
         target=parse_udpout(args.mavlink),
         bind=parse_hostport(args.bind, "--bind"),
+        autopilot=_autopilot_gain(getattr(args, "autopilot", None), plant),
     )
+
+
+def _autopilot_gain(value, plant: Plant) -> np.ndarray | None:
+    """``--autopilot K``: the on-board gain u = K y, one value per plant output (comma-separated)."""
+    if value is None:
+        return None
+    parts = value if isinstance(value, list) else str(value).split(",")
+    gain = [_number(v, "autopilot") for v in parts]
+    if len(gain) != plant.l or plant.m != 1:
+        raise UserError(f"--autopilot needs {plant.l} comma-separated gain(s), one per plant output "
+                        f"(single-input plants only), got {len(gain)}")
+    if not all(np.isfinite(gain)):
+        raise UserError("--autopilot gains must be finite")
+    return np.array([gain])

@@ -21,6 +21,11 @@ Late and lost. A command whose application time would be ``>= (k+1) h`` is late:
 the actuator holds its last value for the next interval too (the paper leaves ``tau >= h`` to future
 work; holding is what a real servo with a stale-command rule does). A sample never answered by ``(k+1) h``
 is lost. A command for a sample older than the last applied one, or a repeat of it, is stale and ignored.
+
+On-board autopilot (``autopilot``, a gain K with u(k) = K y(k)): the vehicle flies itself, as in an
+observe-only run. At sample k it issues u(k) from its own measurement, saturated at the actuator limit,
+reports it in that sample's ACTUATOR_OUTPUT_STATUS (the contract's observe-only meaning) and applies it at
+``k h + tau(k)`` (the emulated on-board delay). Commands from outside are counted and ignored.
 """
 
 from __future__ import annotations
@@ -96,6 +101,7 @@ class Simulation:
     sensor_noise: float = 0.0
     seed: int = 0
     x0: list[float] | None = None
+    autopilot: np.ndarray | None = None  # m x l gain of the on-board controller (None: flown by commands)
     stats: RunStats = field(default_factory=RunStats)
 
     def __post_init__(self) -> None:
@@ -131,6 +137,8 @@ class Simulation:
         current simulated time, which is never behind the event loop).
         """
         self.stats.commands["received"] += 1
+        if self.autopilot is not None:
+            return self._count("ignored_autopilot")
         if k <= self.last_applied:
             return self._count("stale")
         if k > self.k or k < 0:
@@ -174,8 +182,11 @@ class Simulation:
         self.stats.samples["taken"] += 1
         self.stats.tau_drawn.append(tau)
         measured = self._measure(k, x)
+        reported = self.airframe.position
+        if self.autopilot is not None:
+            reported = self._autopilot(t, k, tau, measured)
         sample = Sample(sysid=self.sysid, k=k, t=t, alpha_deg=measured[0], q_deg_s=measured[1],
-                        elevator_deg=self.airframe.position)
+                        elevator_deg=reported)
         fate = self.impairment.fate(UPLINK, k)
         if not fate:
             self.stats.samples["dropped"] += 1
@@ -187,6 +198,15 @@ class Simulation:
             self._push((k + 1) * self.h, self._sample, k + 1)
         else:
             self._push((k + 1) * self.h, self._finish, k + 1)
+
+    def _autopilot(self, t: float, k: int, tau: float, measured: list[float]) -> float:
+        """Issue the on-board command for sample k; it acts after the drawn delay. Returns u(k)."""
+        u = float((self.autopilot @ (self.plant.C @ np.asarray(measured))).ravel()[0])
+        limit = self.plant.actuator.limit
+        if limit is not None:
+            u = min(max(u, -limit), limit)
+        self._push(t + tau, self._apply, k, u)
+        return u
 
     def _measure(self, k: int, x: list[float]) -> list[float]:
         if self.sensor_noise <= 0:

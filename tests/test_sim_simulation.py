@@ -167,3 +167,19 @@ def test_paper_wind_and_faults_reach_the_truth():
     assert t[0]["d"] == [pytest.approx(0.001)] and t[1]["d"] == [pytest.approx(0.1 * 0.9922 * 0.01)]
     assert all(r["elevator"] == 3.0 and r["stuck"] for r in t[10:])
     assert [r["effectiveness"] for r in t[19:21] + t[29:31]] == [1.0, 0.5, 0.5, 1.0]
+
+
+def test_autopilot_reports_its_own_command_and_applies_it_after_the_drawn_delay() -> None:
+    rec = Recorder()
+    sim = Simulation(PLANT, rec, steps=30, fault=parse_fault_spec("bias:2@10"),
+                     delay=parse_delay_spec("uniform:0:0.4", seed=3), autopilot=np.array([[-0.3]]))
+    while not sim.done:
+        sim.run_until(sim.next_time())
+        assert sim.receive_command(max(sim.k, 0), 25.0, sim.next_time() or 0.0) == "ignored_autopilot"
+    assert len(rec.samples) == 30
+    for s in rec.samples:  # u(k) = K y(k), reported with sample k
+        assert s.elevator_deg == pytest.approx(-0.3 * s.alpha_deg, abs=1e-12)
+    assert any(abs(s.elevator_deg) > 0.1 for s in rec.samples[12:])  # it reacts to the fault
+    applied = [t for t in rec.truth if t["status"] == "applied"]
+    assert len(applied) == 30 and all(0.0 <= t["tau"] <= 0.4 + 1e-9 for t in applied)
+    assert [t["tau"] for t in applied[:5]] == pytest.approx([t["tau_drawn"] for t in applied[:5]])
