@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["register", "add_model_arguments", "load_models"]
+__all__ = ["register", "add_model_arguments", "load_models", "add_alarm_arguments", "alarm_from_args"]
 
 
 def add_model_arguments(p: argparse.ArgumentParser, fleet: bool = True) -> None:
@@ -35,6 +35,27 @@ def load_models(args: argparse.Namespace):
         raise UserError("--signals applies to --plant; in a fleet file give each vehicle a 'signals' key")
     default = load_model(args.plant, args.gains, args.force, args.signals) if args.plant else None
     return load_fleet(fleet_file, default, args.force) if fleet_file else Fleet(default)
+
+
+def add_alarm_arguments(group) -> None:
+    """The alarm's hysteresis flags (shared with ``analyse``, so a log is scored as the live run was)."""
+    group.add_argument("--alarm-threshold", type=float, default=1.0, metavar="X",
+                       help="raise when max |f_hat| >= X (plant units) for --alarm-samples samples in a row "
+                       "(default: 1.0)")
+    group.add_argument("--alarm-clear", type=float, default=0.5, metavar="Y",
+                       help="clear when max |f_hat| < Y for --alarm-samples samples in a row (default: 0.5)")
+    group.add_argument("--alarm-samples", type=int, default=2, metavar="N",
+                       help="persistence of raise and clear (default: 2)")
+
+
+def alarm_from_args(args: argparse.Namespace):
+    from monitor.errors import UserError
+    from monitor.service.alarm import AlarmConfig
+
+    try:
+        return AlarmConfig(args.alarm_threshold, args.alarm_clear, args.alarm_samples)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
 
 
 def register(subparsers) -> None:
@@ -72,13 +93,7 @@ def register(subparsers) -> None:
     out.add_argument("--name", help="monitor name in the liveliness key <prefix>/monitor/<name> (default: host-pid)")
     out.add_argument("--no-truth", dest="truth", action="store_false",
                      help="do not subscribe to <prefix>/*/truth (the simulator's ground truth, recorded beside f_hat)")
-    out.add_argument("--alarm-threshold", type=float, default=1.0, metavar="X",
-                     help="raise when max |f_hat| >= X (plant units) for --alarm-samples samples in a row "
-                     "(default: 1.0)")
-    out.add_argument("--alarm-clear", type=float, default=0.5, metavar="Y",
-                     help="clear when max |f_hat| < Y for --alarm-samples samples in a row (default: 0.5)")
-    out.add_argument("--alarm-samples", type=int, default=2, metavar="N",
-                     help="persistence of raise and clear (default: 2)")
+    add_alarm_arguments(out)
     out.add_argument("--vehicle-timeout", type=float, default=10.0, metavar="S",
                      help="forget a vehicle (its estimator state) after S seconds of silence (default: 10)")
     out.add_argument("--queue", type=int, default=10_000, metavar="N",
@@ -102,14 +117,10 @@ def run(args: argparse.Namespace) -> int:
     from monitor import __version__
     from monitor.errors import UserError
     from monitor.link.transports import parse_connection
-    from monitor.service.alarm import AlarmConfig
     from monitor.service.daemon import MonitorConfig, default_name, run_daemon
     from monitor.wire.zenoh_session import config_from_args
 
-    try:
-        alarm = AlarmConfig(args.alarm_threshold, args.alarm_clear, args.alarm_samples)
-    except ValueError as exc:
-        raise UserError(str(exc)) from None
+    alarm = alarm_from_args(args)
     if not args.vehicle_timeout > 0:
         raise UserError("--vehicle-timeout must be positive")
     if args.queue < 1:

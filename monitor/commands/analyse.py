@@ -1,0 +1,96 @@
+"""``fault-monitor analyse FLIGHT.tlog``: observe-only estimation over a MAVLink telemetry log."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+__all__ = ["register"]
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "analyse", help="observe-only fault estimation over a MAVLink telemetry log (.tlog), offline",
+        description=(
+            "Run the observer (eq. 5) over a flight's telemetry log as MAVProxy or QGroundControl write it "
+            "(8-byte big-endian microsecond time + one MAVLink frame per record), with u(k) read from the "
+            "vehicle's actuator report: the same assembler and estimator as 'run --observe'. Prints the report "
+            "of 'fault-monitor replay'; --rrd also writes the recording in the same layout as 'run'."),
+        epilog="Example: fault-monitor analyse flight.tlog --plant paper-continuous --gains gains.toml "
+               "--rrd flight.rrd --fault bias:2@20")
+    p.add_argument("tlog", metavar="FLIGHT.tlog", help="the telemetry log")
+    from monitor.commands.run import add_alarm_arguments, add_model_arguments
+
+    add_model_arguments(p, fleet=False)
+    p.add_argument("--sysid", type=int, metavar="N", help="analyse only this system id (default: every vehicle "
+                   "in the log)")
+    p.add_argument("--rrd", metavar="FILE", help="also write the recording (same layout as 'run', RECORDING.md)")
+    p.add_argument("--fault", metavar="SPEC", help="the fault the flight had, to score settling and e_f "
+                   "(e.g. bias:2@20)")
+    p.add_argument("--json", action="store_true", help="print the report as JSON (the shape of 'replay --json')")
+    add_alarm_arguments(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from monitor import __version__
+    from monitor.commands.replay import format_report
+    from monitor.commands.run import alarm_from_args, load_models
+    from monitor.errors import UserError
+    from monitor.replay import Recording, VehicleSeries, analyse
+    from monitor.service.offline import analyse_log
+    from monitor.wire.specs import parse_fault_spec
+
+    if args.sysid is not None and not 1 <= args.sysid <= 255:
+        raise UserError(f"--sysid must be a MAVLink system id 1-255, got {args.sysid}")
+    if args.fault is not None:
+        parse_fault_spec(args.fault)  # a bad SPEC is a one-line error before the work starts
+    if not Path(args.tlog).is_file():
+        raise UserError(f"{args.tlog}: no such log file")
+    alarm = alarm_from_args(args)
+    fleet = load_models(args)
+    model = fleet.default
+    properties = {"monitor_version": __version__, "mode": "observe (analyse)", "source_log": str(args.tlog),
+                  "plant": model.plant.name, "plant_hash": model.plant.digest, "gains": str(args.gains),
+                  "gains_method": model.gains.method, "signals": model.signals.describe(),
+                  "alarm": f"threshold={alarm.threshold} clear={alarm.clear} samples={alarm.samples}"}
+    recorder = None
+    if args.rrd:
+        from monitor.service.recorder import RrdRecorder
+
+        recorder = RrdRecorder(args.rrd, properties=properties)
+
+    def progress(fraction: float, samples: int) -> None:
+        print(f"analyse: {fraction:.0%} of {args.tlog}, {samples} samples", file=sys.stderr, flush=True)
+
+    try:
+        result = analyse_log(args.tlog, fleet, alarm, sysid=args.sysid, recorder=recorder, progress=progress)
+    finally:
+        if recorder is not None:
+            recorder.close()
+    vehicles: dict[int, VehicleSeries] = {}
+    for record in result.records:
+        vehicles.setdefault(record.sysid, VehicleSeries(record.sysid)).samples.append(record)
+    if not vehicles:
+        c = result.counts
+        raise UserError(f"{args.tlog}: no sample could be assembled from {result.log_records} log records "
+                        f"({c['frames']} frames; the signal map needs {', '.join(model.signals.messages(True))}"
+                        + (f" from sysid {args.sysid}" if args.sysid else "") + ")")
+    recording = Recording(path=Path(args.rrd or args.tlog), application_id="fault-monitor analyse",
+                          properties={**properties, "fault_monitor_version": __version__}, vehicles=vehicles,
+                          has_footer=True)
+    report = analyse(recording, sysid=args.sysid, fault_spec=args.fault)
+    report["log"] = {"records": result.log_records, "skipped_bytes": result.skipped_bytes,
+                     "truncated": result.truncated, "seconds": round(result.seconds, 3), **result.counts}
+    if args.json:
+        print(json.dumps(report))
+    else:
+        print(format_report(report))
+        c = result.counts
+        print(f"log: {result.log_records} records in {result.seconds:.2f} s; {c['processed']} samples, "
+              f"{c['incomplete']} incomplete, {c['garbage']} garbage, {result.skipped_bytes} bytes skipped"
+              + (", truncated at the end" if result.truncated else ""))
+    return 0

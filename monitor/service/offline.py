@@ -1,0 +1,92 @@
+"""Observe-only estimation over a MAVLink telemetry log: the live pipeline, fed from a file.
+
+The same ``FrameParser`` (one per record: a tlog record holds one whole frame), the same assembler,
+vehicle table and estimator as ``fault-monitor run --observe``; ``now`` and ``wall`` are the log's own
+timestamps, so the assembler's bounded waits and the observed delay mean what they meant in flight.
+Nothing is sent. Samples go to an in-memory list (for the report, which is ``replay``'s) and, with
+``--rrd``, to the same recorder and layout as ``run``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from monitor.link.frames import FrameParser
+from monitor.link.tlog import TlogStats, read_tlog
+from monitor.service.alarm import AlarmConfig
+from monitor.service.pipeline import Pipeline
+from monitor.service.records import SampleRecord
+from monitor.service.vehicles import Fleet, VehicleTable
+
+__all__ = ["LogAnalysis", "analyse_log"]
+
+log = logging.getLogger("monitor.analyse")
+
+
+class _Collect:
+    """The recorder interface: keep every record, and forward to a real recorder when there is one."""
+
+    def __init__(self, forward=None) -> None:
+        self.records: list[SampleRecord] = []
+        self.forward = forward
+
+    def submit(self, record: SampleRecord) -> None:
+        self.records.append(record)
+        if self.forward is not None:
+            self.forward.submit(record)
+
+
+@dataclass
+class LogAnalysis:
+    records: list[SampleRecord]
+    counts: dict[str, int]
+    log_records: int
+    skipped_bytes: int
+    truncated: bool
+    seconds: float
+    first_t_us: int | None = None
+    last_t_us: int | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def analyse_log(path: str | Path, fleet: Fleet, alarm: AlarmConfig, sysid: int | None = None, recorder=None,
+                progress: Callable[[float, int], None] | None = None, progress_every_s: float = 2.0) -> LogAnalysis:
+    """Run the observer over every sample of the log (only ``sysid``'s if given)."""
+    start = time.perf_counter()
+    table = VehicleTable(fleet, alarm, timeout=float("inf"), observe=True)
+    collect = _Collect(recorder)
+    pipeline = Pipeline(table, send_commands=False, gcs_feedback=False, recorder=collect)
+    parser = FrameParser(pipeline.frames)
+    stats = TlogStats()
+    size = max(Path(path).stat().st_size, 1) if Path(path).exists() else 1
+    first = last = None
+    next_report = start + progress_every_s
+    position = 0
+    feed, on_frames, perf_ns = parser.feed, pipeline.on_frames, time.perf_counter_ns
+    for t_us, frame in read_tlog(path, stats):
+        if first is None:
+            first = t_us
+        last = t_us
+        position += 8 + len(frame)
+        frames = feed(frame)
+        if not frames:
+            continue
+        if sysid is not None:
+            frames = [f for f in frames if f[1] == sysid]
+            if not frames:
+                continue
+        t = t_us * 1e-6
+        on_frames(None, frames, perf_ns(), now=t, wall=t)
+        if progress is not None and stats.records % 4096 == 0:
+            now = time.perf_counter()
+            if now >= next_report:
+                next_report = now + progress_every_s
+                progress(position / size, len(collect.records))
+    if last is not None:
+        pipeline.flush(last * 1e-6, last * 1e-6)
+    return LogAnalysis(collect.records, pipeline.counts(), stats.records, stats.skipped_bytes, stats.truncated,
+                       time.perf_counter() - start, first, last)
