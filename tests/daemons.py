@@ -53,7 +53,7 @@ class Daemon:
 
     def __enter__(self) -> "Daemon":
         self._log = open(self.log_path, "wb")
-        self.proc = subprocess.Popen(self.cmd, stdout=self._log, stderr=subprocess.STDOUT, env=self.env,
+        self.proc = subprocess.Popen(self.cmd, stdin=subprocess.DEVNULL, stdout=self._log, stderr=subprocess.STDOUT, env=self.env,
                                      cwd=REPO, start_new_session=True)
         return self
 

@@ -123,6 +123,8 @@ class SampleAssembler:
         t_us = self._instant_us(int(values[t_pos]), unit_us)
         k = int(round(t_us / self.h_us))
         c = self.counters
+        if message in self.actuator_messages and not self.expect_actuator:
+            self.expect_actuator = True  # it reports its actuator: from now on that report is waited for
         if self.last_k is not None:
             if k <= self.last_k:
                 if message != self.signals.instant:
@@ -155,8 +157,6 @@ class SampleAssembler:
             slot.time_usec = t_us
             slot.route = route
             self._latest_ms = t_us // 1000
-        if message in self.actuator_messages and not self.expect_actuator:
-            self.expect_actuator = True
         if not self.required <= slot.messages:
             return []
         if self.expect_actuator and not self.actuator_messages <= slot.messages:

@@ -1,0 +1,143 @@
+"""MAVProxy, the router users put between vehicle and monitor, in the loop (one message per datagram).
+
+Closed loop: sim-vehicle -> MAVProxy (udpin master, udpout to the monitor) -> fault-monitor run, and the
+commands and ground-station feedback back the same way; MAVProxy's own tlog must hold all three.
+Observe-only: the vehicle flies on its own gain (--autopilot), the monitor only watches, and the tlog
+MAVProxy wrote during the live run, analysed offline, must give the same f_hat as the live monitor.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import socket
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.daemons import Daemon, free_tcp_port, free_udp_port, wait_for
+from tests.e2e.test_monitor_paper import gains_file, processed_count, wait_ready  # noqa: F401 (fixture)
+
+STEPS = 40
+SPEEDUP = 10
+
+
+def _mavproxy_script() -> str:
+    script = Path(sys.executable).with_name("mavproxy.py")
+    if not script.exists():
+        pytest.fail("mavproxy.py not found beside the interpreter: install the test extra (pip install '.[test]')")
+    return str(script)
+
+
+def _port_in_use(port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError as exc:
+            return exc.errno == errno.EADDRINUSE
+    return False
+
+
+class MavProxy(Daemon):
+    """Headless MAVProxy routing ``master`` (where the vehicle sends) to the monitor, writing a tlog."""
+
+    def __init__(self, tmp_path: Path, master: int, out: int) -> None:
+        super().__init__("x", [], tmp_path / "mavproxy.log")
+        self.tlog = tmp_path / "mavproxy.tlog"
+        self.master = master
+        self.cmd = [sys.executable, _mavproxy_script(), f"--master=udpin:127.0.0.1:{master}",
+                    f"--out=udpout:127.0.0.1:{out}", "--daemon", "--mav20", "--dialect=ardupilotmega",
+                    f"--state-basedir={tmp_path}", f"--logfile={self.tlog}", "--default-modules=", "--nowait"]
+
+    def __enter__(self) -> "MavProxy":
+        super().__enter__()
+        wait_for(lambda: _port_in_use(self.master) or self.proc.poll() is not None, 30, what="MAVProxy listening")
+        assert self.proc.poll() is None, self.log()
+        return self
+
+    def stop(self, timeout: float = 10.0):
+        import signal
+
+        self.signal(signal.SIGINT)  # MAVProxy closes its log on SIGINT
+        try:
+            self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            pass
+        return super().stop(timeout)
+
+
+def _tlog_counts(path: Path) -> Counter:
+    from pymavlink import mavutil
+
+    log = mavutil.mavlink_connection(str(path), dialect="ardupilotmega")
+    counts: Counter = Counter()
+    while (msg := log.recv_match(blocking=False)) is not None:
+        name = msg.get_type()
+        if name == "NAMED_VALUE_FLOAT":
+            name += ":" + msg.name
+        counts[(name, msg.get_srcSystem())] += 1
+    return counts
+
+
+def _vehicle(tmp_path: Path, port: int, *extra: str) -> Daemon:
+    args = ["run", "--steps", str(STEPS), "--speedup", str(SPEEDUP), "--mavlink", f"udpout:127.0.0.1:{port}",
+            "--no-zenoh", "--fault", "bias:2@20", "--summary-json", str(tmp_path / "vehicle.json"), *extra]
+    return Daemon("sim_vehicle", args, tmp_path / "vehicle.log")
+
+
+def _monitor(tmp_path: Path, gains: Path, port: int, *extra: str) -> Daemon:
+    args = ["run", "--plant", "paper-continuous", "--gains", str(gains), "--mavlink", f"udpin:127.0.0.1:{port}",
+            "--zenoh-listen", f"tcp/127.0.0.1:{free_tcp_port()}", "--name", "behind-mavproxy", *extra]
+    return Daemon("monitor", args, tmp_path / "monitor.log")
+
+
+def test_closed_loop_through_mavproxy(tmp_path: Path, gains_file: Path) -> None:
+    monitor_port, master_port = free_udp_port(), free_udp_port()
+    with _monitor(tmp_path, gains_file, monitor_port) as monitor, MavProxy(tmp_path, master_port, monitor_port) as mp:
+        wait_ready(monitor)
+        with _vehicle(tmp_path, master_port) as vehicle:
+            assert vehicle.wait(60) == 0, vehicle.log()
+        mp.stop()
+        log = monitor.log()
+        assert monitor.stop() == 0
+    summary = json.loads((tmp_path / "vehicle.json").read_text())
+    assert processed_count(monitor.log()) == STEPS, log[-2000:]
+    assert summary["commands"].get("applied", 0) >= 0.95 * STEPS, summary
+    counts = _tlog_counts(mp.tlog)
+    for telemetry in ("ATTITUDE", "AOA_SSA", "ACTUATOR_OUTPUT_STATUS"):
+        assert counts[(telemetry, 1)] >= STEPS - 1, counts
+    assert counts[("SET_ACTUATOR_CONTROL_TARGET", 255)] >= STEPS - 1, counts
+    assert counts[("NAMED_VALUE_FLOAT:FHAT", 255)] >= STEPS - 1, counts
+    assert counts[("STATUSTEXT", 255)] >= 1, counts  # the alarm on the 2-degree bias reached the GCS side
+
+
+def test_observe_only_live_and_from_mavproxys_tlog_agree(tmp_path: Path, gains_file: Path) -> None:
+    from monitor.replay import load_recording
+
+    monitor_port, master_port = free_udp_port(), free_udp_port()
+    live_rrd, offline_rrd = tmp_path / "live.rrd", tmp_path / "offline.rrd"
+    with _monitor(tmp_path, gains_file, monitor_port, "--observe", "--rrd", str(live_rrd)) as monitor, \
+            MavProxy(tmp_path, master_port, monitor_port) as mp:
+        wait_ready(monitor)
+        with _vehicle(tmp_path, master_port, "--autopilot", "-0.5") as vehicle:
+            assert vehicle.wait(60) == 0, vehicle.log()
+        mp.stop()
+        assert monitor.stop() == 0, monitor.log()[-2000:]
+    log = monitor.log()
+    assert processed_count(log) == STEPS and "commands 0" in log, log[-2000:]
+    assert _tlog_counts(mp.tlog)[("SET_ACTUATOR_CONTROL_TARGET", 255)] == 0
+    result = subprocess.run([sys.executable, "-m", "monitor", "analyse", str(mp.tlog), "--plant", "paper-continuous",
+                             "--gains", str(gains_file), "--rrd", str(offline_rrd), "--json", "--fault", "bias:2@20"],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["samples"] == STEPS and report["settling_steps"] is not None
+    live = {s.k: s.f_hat[0] for s in load_recording(live_rrd).vehicles[1].samples}
+    offline = {s.k: s.f_hat[0] for s in load_recording(offline_rrd).vehicles[1].samples}
+    assert sorted(live) == sorted(offline) == list(range(STEPS))
+    assert np.allclose([live[k] for k in live], [offline[k] for k in live], atol=1e-9)
+    assert abs(live[STEPS - 1] - 2.0) < 0.2  # observe-only still finds the bias
