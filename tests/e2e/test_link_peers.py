@@ -16,7 +16,8 @@ from monitor.plant import load_plant, parse_plant
 from monitor.wire.mavlink import mavlink, new_codec
 from tests.daemons import Daemon, free_tcp_port, free_udp_port, wait_for
 from tests.e2e.test_monitor_paper import gains_file, processed_count, wait_ready  # noqa: F401 (fixture)
-from tests.e2e.wire_peer import PeerVehicle, check_against_equations, fly_tcp_server, fly_udp, read_gains
+from tests.e2e.wire_peer import (PeerVehicle, check_against_equations, fly_tcp_client, fly_tcp_server, fly_udp,
+                                 read_gains)
 
 STEPS = 60
 
@@ -49,6 +50,7 @@ def test_one_message_per_datagram_matches_eqs_5_6_computed_from_the_wire(tmp_pat
 
 
 def test_tcp_stream_split_at_random_byte_boundaries(tmp_path: Path, gains_file: Path) -> None:
+    """The monitor connects (``tcp:``) to an autopilot-style server that cuts its stream anywhere."""
     plant = load_plant("paper-continuous")
     peer = PeerVehicle(plant, sysid=9, seed=2)
     with socket.socket() as server:
@@ -58,6 +60,18 @@ def test_tcp_stream_split_at_random_byte_boundaries(tmp_path: Path, gains_file: 
         with _monitor(tmp_path, "paper-continuous", gains_file, f"tcp:127.0.0.1:{port}", "tcp") as monitor:
             fly_tcp_server(peer, server, STEPS)
             log = _stop(monitor)
+    assert processed_count(log) == STEPS, log[-2000:]
+    assert check_against_equations(plant, read_gains(gains_file), peer.wire, list(range(STEPS))) == STEPS
+
+
+def test_tcpin_accepts_a_vehicle_that_connects(tmp_path: Path, gains_file: Path) -> None:
+    plant = load_plant("paper-continuous")
+    peer = PeerVehicle(plant, sysid=10, seed=4)
+    port = free_tcp_port()
+    with _monitor(tmp_path, "paper-continuous", gains_file, f"tcpin:127.0.0.1:{port}", "tcpin") as monitor:
+        wait_ready(monitor)
+        fly_tcp_client(peer, port, STEPS)
+        log = _stop(monitor)
     assert processed_count(log) == STEPS, log[-2000:]
     assert check_against_equations(plant, read_gains(gains_file), peer.wire, list(range(STEPS))) == STEPS
 

@@ -45,12 +45,12 @@ def _port_in_use(port: int) -> bool:
 class MavProxy(Daemon):
     """Headless MAVProxy routing ``master`` (where the vehicle sends) to the monitor, writing a tlog."""
 
-    def __init__(self, tmp_path: Path, master: int, out: int) -> None:
+    def __init__(self, tmp_path: Path, master: int, out: int, out_kind: str = "udpout") -> None:
         super().__init__("x", [], tmp_path / "mavproxy.log")
         self.tlog = tmp_path / "mavproxy.tlog"
         self.master = master
         self.cmd = [sys.executable, _mavproxy_script(), f"--master=udpin:127.0.0.1:{master}",
-                    f"--out=udpout:127.0.0.1:{out}", "--daemon", "--mav20", "--dialect=ardupilotmega",
+                    f"--out={out_kind}:127.0.0.1:{out}", "--daemon", "--mav20", "--dialect=ardupilotmega",
                     f"--state-basedir={tmp_path}", f"--logfile={self.tlog}", "--default-modules=", "--nowait"]
 
     def __enter__(self) -> "MavProxy":
@@ -89,15 +89,18 @@ def _vehicle(tmp_path: Path, port: int, *extra: str) -> Daemon:
     return Daemon("sim_vehicle", args, tmp_path / "vehicle.log")
 
 
-def _monitor(tmp_path: Path, gains: Path, port: int, *extra: str) -> Daemon:
-    args = ["run", "--plant", "paper-continuous", "--gains", str(gains), "--mavlink", f"udpin:127.0.0.1:{port}",
+def _monitor(tmp_path: Path, gains: Path, port: int, *extra: str, kind: str = "udpin") -> Daemon:
+    args = ["run", "--plant", "paper-continuous", "--gains", str(gains), "--mavlink", f"{kind}:127.0.0.1:{port}",
             "--zenoh-listen", f"tcp/127.0.0.1:{free_tcp_port()}", "--name", "behind-mavproxy", *extra]
     return Daemon("monitor", args, tmp_path / "monitor.log")
 
 
-def test_closed_loop_through_mavproxy(tmp_path: Path, gains_file: Path) -> None:
+@pytest.mark.parametrize("monitor_kind, mavproxy_out", [("udpin", "udpout"), ("udpout", "udpin")])
+def test_closed_loop_through_mavproxy(tmp_path: Path, gains_file: Path, monitor_kind: str, mavproxy_out: str) -> None:
+    """Either side may listen: with MAVProxy's --out=udpin the monitor's HEARTBEAT is what opens the way back."""
     monitor_port, master_port = free_udp_port(), free_udp_port()
-    with _monitor(tmp_path, gains_file, monitor_port) as monitor, MavProxy(tmp_path, master_port, monitor_port) as mp:
+    with MavProxy(tmp_path, master_port, monitor_port, mavproxy_out) as mp, \
+            _monitor(tmp_path, gains_file, monitor_port, kind=monitor_kind) as monitor:
         wait_ready(monitor)
         with _vehicle(tmp_path, master_port) as vehicle:
             assert vehicle.wait(60) == 0, vehicle.log()

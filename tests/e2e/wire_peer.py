@@ -140,9 +140,20 @@ def fly_udp(peer: PeerVehicle, port: int, steps: int, wait_s: float = 1.0, linge
 
 
 def fly_tcp_server(peer: PeerVehicle, server: socket.socket, steps: int, wait_s: float = 1.0) -> None:
-    """An autopilot-style TCP server: the byte stream of each sample cut at random boundaries."""
+    """An autopilot-style TCP server (SITL on 5760): the monitor connects with ``tcp:``."""
     server.settimeout(15)
     conn, _ = server.accept()
+    fly_tcp_stream(peer, conn, steps, wait_s)
+
+
+def fly_tcp_client(peer: PeerVehicle, port: int, steps: int, wait_s: float = 1.0) -> None:
+    """A vehicle or router that connects to the monitor's ``tcpin:`` port."""
+    conn = socket.create_connection(("127.0.0.1", port), timeout=5)
+    fly_tcp_stream(peer, conn, steps, wait_s)
+
+
+def fly_tcp_stream(peer: PeerVehicle, conn: socket.socket, steps: int, wait_s: float = 1.0) -> None:
+    """The byte stream of each sample cut at random boundaries, each piece its own write."""
     with conn:
         conn.settimeout(0.05)
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
