@@ -1,14 +1,19 @@
-"""Benchmark of the live monitor (run by hand; prints figures, asserts nothing).
+"""Benchmark of the live monitor over real sockets (run by hand; prints figures, asserts nothing).
 
-1. Per-sample processing time, p50/p99, of the monitor's handling of one telemetry datagram
-   (parse + estimator step + command encode + sendto + Zenoh hand-off, exactly ``Monitor.on_datagram``
-   with a real Zenoh session and publisher thread), and in the same run of a bare pymavlink echo of the
-   same datagrams (parse + encode the reply + sendto): the floor. Target: monitor <= 1.5x echo.
-2. Vehicle-samples per second one ``fault-monitor run`` process sustains with 1, 10, 100 vehicles: a
-   load generator (this process, one UDP socket per vehicle, datagrams pre-encoded) keeps a window of
-   samples in flight and counts the commands that come back. Target: >= 10,000 vehicle-samples/s.
+1. Round trip at 10 vehicles x 50 Hz, for both framings: *packed* (ATTITUDE + AOA_SSA +
+   ACTUATOR_OUTPUT_STATUS in one datagram, as sim-vehicle sends) and *one message per datagram* (as
+   MAVProxy, mavlink-router and autopilots send). The round trip runs from the moment the sample's last
+   datagram is sent to the moment its SET_ACTUATOR_CONTROL_TARGET comes back. The floor is a bare
+   pymavlink echo in its own process (recvfrom, ``parse_buffer``, on AOA_SSA encode and send the reply
+   with pymavlink). Target: monitor p50 <= 1.5x echo p50 on one-message-per-datagram traffic.
+2. Answered fraction at 100 vehicles x 50 Hz, both framings. Target: >= 99 %.
+3. In-process cost per sample of ``Pipeline.on_frames`` (parse + assemble + estimator + command + FHAT
+   feedback + Zenoh hand-off), both framings.
 
-    /work/venv/bin/python benchmarks/bench_monitor.py [--samples 20000] [--vehicles 1,10,100] [--gains G]
+The plant is paper-continuous re-sampled at h = 20 ms (50 Hz), with placeholder gains (the figures do not
+depend on them). Load generator: this process, one UDP socket per vehicle.
+
+    /work/venv/bin/python benchmarks/bench_monitor.py [--seconds 10] [--skip-inprocess]
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import os
 import select
 import signal
 import socket
+import struct
 import subprocess
 import sys
 import tempfile
@@ -27,180 +33,241 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+H = 0.02
+_CMD_ID = 139
+_CMD_TIME = struct.Struct("<Q")
 
-def percentiles(ns: list[int]) -> tuple[float, float]:
-    ns = sorted(ns)
-    return ns[len(ns) // 2] / 1e3, ns[int(len(ns) * 0.99)] / 1e3
+ECHO_SERVER = r"""
+import os, socket, sys
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import ardupilotmega as m
+sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+sock.bind(("127.0.0.1", int(sys.argv[1])))
+sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+codecs = {}
+class Sink:
+    def write(self, data): pass
+while True:
+    data, addr = sock.recvfrom(65535)
+    codec = codecs.get(addr)
+    if codec is None:
+        codec = codecs[addr] = m.MAVLink(Sink(), srcSystem=255, srcComponent=191)
+        codec.robust_parsing = True
+    for msg in codec.parse_buffer(data) or []:
+        if msg.get_type() == "AOA_SSA":
+            reply = m.MAVLink_set_actuator_control_target_message(msg.time_usec, 0, msg.get_srcSystem(), 1,
+                                                                  [0.0, msg.AOA / 30.0] + [0.0] * 6)
+            sock.sendto(reply.pack(codec), addr)
+"""
 
 
-def make_gains(path: str | None) -> str:
-    if path:
-        return path
-    from monitor.design.certified import design_certified
+def bench_plant(directory: Path) -> tuple[Path, Path]:
+    """paper-continuous at 50 Hz and deadbeat observer gains for it (files in ``directory``)."""
+    import numpy as np
+
+    from monitor.closed_loop import Gains
+    from monitor.design.result import DesignResult
     from monitor.gains import write_gains
-    from monitor.plant import load_plant
+    from monitor.plant import load_plant, parse_plant
 
-    out = os.path.join(tempfile.mkdtemp(prefix="bench-monitor-"), "gains.toml")
-    plant = load_plant("paper-continuous")
-    write_gains(out, design_certified(plant), plant)
+    text = (REPO / "monitor/presets/paper-continuous.toml").read_text()
+    text = text.replace("h = 1.0", f"h = {H}").replace("tau_max = 0.4612", f"tau_max = {0.4612 * H}")
+    text = text.replace('name = "paper-continuous"', 'name = "paper-continuous-50hz"')
+    plant_path = directory / "plant-50hz.toml"
+    plant_path.write_text(text)
+    p = parse_plant(text, str(plant_path))
+    # the load generator's y answers no command, so an observer would chase a phantom fault: L = M = 0 keeps
+    # the state bounded; the cost per sample does not depend on the values
+    gains = Gains(L=np.zeros((2, 1)), M=np.zeros((1, 1)), K1=np.array([[-0.2]]), K2=np.zeros((1, 1)),
+                  K3=np.zeros((1, 1)))
+    gains_path = directory / "gains-50hz.toml"
+    write_gains(gains_path, DesignResult("bench", gains, 0.0, 0.0, "n/a", 0, 0, 0), p)
+    assert load_plant(plant_path).h == H
+    return plant_path, gains_path
+
+
+def sample_frames(sysid: int, n: int) -> list[list[bytes]]:
+    """Per sample: the three frames, encoded by pymavlink."""
+    from monitor.wire.mavlink import mavlink, new_codec
+
+    codec = new_codec(sysid, 1)
+    out = []
+    for k in range(n):
+        t_us = k * int(H * 1e6)
+        frames = []
+        for msg in (mavlink.MAVLink_attitude_message(t_us // 1000, 0, 0, 0, 0, 0.01, 0),
+                    mavlink.MAVLink_aoa_ssa_message(t_us, 0.5 + 0.01 * (k % 7), 0.0),
+                    mavlink.MAVLink_actuator_output_status_message(t_us, 1, [0.1] + [0.0] * 31)):
+            codec.send(msg)
+            frames.append(codec.file.take())
+        out.append(frames)
     return out
 
 
-def datagrams(sysid: int, n: int) -> list[bytes]:
-    from monitor.wire.mavlink import VEHICLE_COMPONENT, Sample, encode_sample, new_codec
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
-    codec = new_codec(sysid, VEHICLE_COMPONENT)
-    return [encode_sample(codec, Sample(sysid, k, float(k), 0.5 + 0.01 * (k % 7), 0.2, 0.1), 1.0) for k in range(n)]
+
+def start_server(kind: str, port: int, plant: Path, gains: Path, log_path: str) -> subprocess.Popen:
+    if kind == "echo":
+        cmd = [sys.executable, "-c", ECHO_SERVER, str(port)]
+    else:
+        cmd = [sys.executable, "-m", "monitor", "--log-level", "WARNING", "run", "--plant", str(plant), "--gains",
+               str(gains), "--mavlink", f"udpin:127.0.0.1:{port}", "--vehicle-timeout", "60", "--no-truth"]
+    proc = subprocess.Popen(cmd, stdout=open(log_path, "wb"), stderr=subprocess.STDOUT, cwd=REPO,
+                            start_new_session=True, env={**os.environ, "RERUN_ANALYTICS": "0"})
+    time.sleep(2.5 if kind == "monitor" else 0.5)  # imports, Zenoh session
+    return proc
 
 
-def per_sample(gains: str, n: int) -> None:
-    from monitor.service.daemon import Monitor, MonitorConfig
+def stop_server(proc: subprocess.Popen) -> None:
+    proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(15)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(5)
+
+
+def drive(port: int, vehicles: int, seconds: float, framing: str) -> tuple[list[float], int, int]:
+    """Paced load: every vehicle sends one sample per H; returns (round trips in s, sent, answered)."""
+    n = int(seconds / H)
+    frames = [sample_frames(v + 1, n) for v in range(vehicles)]
+    socks = []
+    for _ in range(vehicles):
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        s.setblocking(False)
+        socks.append(s)
+    by_fd = {s.fileno(): v for v, s in enumerate(socks)}
+    poller = select.poll()
+    for fd in by_fd:
+        poller.register(fd, select.POLLIN)
+    target = ("127.0.0.1", port)
+    sent_at: dict[tuple[int, int], float] = {}
+    rtts: list[float] = []
+    h_us = int(H * 1e6)
+    start = time.perf_counter() + 0.1
+
+    def receive(timeout_ms: int) -> None:
+        for fd, _ in poller.poll(timeout_ms):
+            v = by_fd[fd]
+            while True:
+                try:
+                    data = socks[v].recv(4096)
+                except BlockingIOError:
+                    break
+                now = time.perf_counter()
+                i = 0
+                while i + 12 <= len(data):  # several frames may share a datagram
+                    mlen = data[i + 1]
+                    msgid = data[i + 7] | data[i + 8] << 8 | data[i + 9] << 16
+                    if msgid == _CMD_ID:
+                        k = _CMD_TIME.unpack_from(data, i + 10)[0] // h_us
+                        t0 = sent_at.pop((v, k), None)
+                        if t0 is not None:
+                            rtts.append(now - t0)
+                    i += 12 + mlen + (13 if data[i + 2] & 1 else 0)
+
+    for k in range(n):
+        due = start + k * H
+        while (wait := due - time.perf_counter()) > 0:
+            receive(max(0, int(wait * 1000)))
+        for v in range(vehicles):
+            sample = frames[v][k]
+            if framing == "packed":
+                socks[v].sendto(b"".join(sample), target)
+            else:
+                for frame in sample:
+                    socks[v].sendto(frame, target)
+            sent_at[(v, k)] = time.perf_counter()
+        receive(0)
+    end = time.perf_counter() + 1.0
+    while time.perf_counter() < end and sent_at:
+        receive(50)
+    for s in socks:
+        s.close()
+    return rtts, n * vehicles, len(rtts)
+
+
+def pct(values: list[float], p: float) -> float:
+    values = sorted(values)
+    return values[min(len(values) - 1, int(p / 100 * len(values)))] * 1e6 if values else float("nan")
+
+
+def inprocess(plant: Path, gains: Path, n: int = 20_000) -> None:
+    from monitor.link.frames import FrameParser
+    from monitor.service.daemon import MonitorConfig, build_pipeline
     from monitor.service.publisher import EstimatePublisher
     from monitor.service.vehicles import Fleet, load_model
-    from monitor.wire.mavlink import MONITOR_COMPONENT, Command, encode_command, new_codec, sample_index
     from monitor.wire.zenoh_session import build_config, close_quietly, open_session
 
-    data = datagrams(1, n)
-    sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sink.bind(("127.0.0.1", 0))
-    target = sink.getsockname()
-    out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    out.setblocking(False)
+    class NullLink:
+        def __init__(self) -> None:
+            from monitor.link.frames import FrameEncoder
 
-    def send(frame: bytes, addr) -> None:
-        try:
-            out.sendto(frame, target)
-        except BlockingIOError:
+            self.encoder = FrameEncoder(255, 191)
+
+        def send(self, data: bytes, peer) -> None:
             pass
-
-    def drain() -> None:
-        sink.setblocking(False)
-        try:
-            while True:
-                sink.recv(4096)
-        except BlockingIOError:
-            pass
-
-    def echo_run() -> list[int]:
-        codec = new_codec(255, MONITOR_COMPONENT)
-        times = []
-        for i, d in enumerate(data):
-            t0 = time.perf_counter_ns()
-            for msg in codec.parse_buffer(d) or []:
-                if msg.get_type() == "AOA_SSA":
-                    send(encode_command(codec, Command(1, sample_index(msg.time_usec, 1.0), msg.AOA), 1.0), None)
-            times.append(time.perf_counter_ns() - t0)
-            if i % 100 == 0:
-                drain()
-        return times
 
     session = open_session(build_config())
     publisher = EstimatePublisher(session, "bench", "bench")
     try:
-        def monitor_run() -> list[int]:
-            monitor = Monitor(MonitorConfig(fleet=Fleet(load_model("paper-continuous", gains))), send=send,
-                              publisher=publisher)
+        for framing in ("packed", "one message per datagram"):
+            data = sample_frames(1, n)
+            pipeline = build_pipeline(MonitorConfig(fleet=Fleet(load_model(plant, gains)), connections=[]),
+                                      publisher=publisher)
+            parser = FrameParser(pipeline.frames)
+            route = (NullLink(), ("127.0.0.1", 9))
             times = []
-            for i, d in enumerate(data):
+            for sample in data:
+                chunks = [b"".join(sample)] if framing == "packed" else sample
                 t0 = time.perf_counter_ns()
-                monitor.on_datagram(d, ("127.0.0.1", 9), t0)
+                for chunk in chunks:
+                    frames = parser.feed(chunk)
+                    if frames:
+                        pipeline.on_frames(route, frames, t0)
                 times.append(time.perf_counter_ns() - t0)
-                if i % 100 == 0:
-                    drain()
-            return times
-
-        echo_run(), monitor_run()  # warm up
-        e1, m1, e2, m2 = echo_run(), monitor_run(), echo_run(), monitor_run()
-        (e50, e99), (m50, m99) = percentiles(e1 + e2), percentiles(m1 + m2)
-        print(f"per sample ({2 * n} datagrams each, interleaved runs)")
-        print(f"  bare pymavlink echo : p50 {e50:6.1f} us   p99 {e99:6.1f} us")
-        print(f"  monitor             : p50 {m50:6.1f} us   p99 {m99:6.1f} us   ratio p50 {m50 / e50:.2f}x "
-              f"(target <= 1.5x)   Zenoh drops {publisher.dropped}")
+            times.sort()
+            print(f"  in-process per sample, {framing:25s}: p50 {times[n // 2] / 1e3:6.1f} us   "
+                  f"p99 {times[int(n * 0.99)] / 1e3:6.1f} us   ({pipeline.table.counters.processed} processed)")
     finally:
         close_quietly(session, *publisher.close())
 
 
-def throughput(gains: str, vehicles: int, per_vehicle: int, window: int = 64) -> tuple[float, int, int]:
-    """Start a real monitor daemon, drive ``vehicles`` sysids, return (vehicle-samples/s, sent, answered)."""
-    from tests.daemons import free_udp_port
-
-    port = free_udp_port()
-    log = tempfile.NamedTemporaryFile(prefix="bench-monitor-", suffix=".log", delete=False)
-    proc = subprocess.Popen([sys.executable, "-m", "monitor", "--log-level", "WARNING", "run", "--plant",
-                             "paper-continuous", "--gains", gains, "--mavlink", f"udpin:127.0.0.1:{port}",
-                             "--vehicle-timeout", "60"], stdout=log, stderr=subprocess.STDOUT, cwd=REPO,
-                            start_new_session=True)
-    socks = []
-    try:
-        time.sleep(2.0)  # start-up (imports, Zenoh session)
-        payload = [datagrams(v + 1, per_vehicle) for v in range(vehicles)]
-        for _ in range(vehicles):
-            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-            s.setblocking(False)
-            socks.append(s)
-        target = ("127.0.0.1", port)
-        sent = answered = 0
-        fds = {s.fileno(): s for s in socks}
-        poller = select.poll()
-        for fd in fds:
-            poller.register(fd, select.POLLIN)
-        t0 = time.perf_counter()
-        order = [(v, k) for k in range(per_vehicle) for v in range(vehicles)]
-        idle_since = None
-        while answered < len(order):
-            while sent < len(order) and sent - answered < window:
-                v, k = order[sent]
-                socks[v].sendto(payload[v][k], target)
-                sent += 1
-            events = poller.poll(200)
-            if not events:
-                if sent == len(order):
-                    idle_since = idle_since or time.perf_counter()
-                    if time.perf_counter() - idle_since > 1.0:
-                        break  # some replies will never come (socket buffers overflowed)
-                else:
-                    answered = sent  # lost on the way: refill the window rather than stall
-                continue
-            idle_since = None
-            for fd, _ in events:
-                try:
-                    while True:
-                        fds[fd].recv(4096)
-                        answered += 1
-                except BlockingIOError:
-                    pass
-        elapsed = time.perf_counter() - t0
-        return answered / elapsed, sent, answered
-    finally:
-        for s in socks:
-            s.close()
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(15)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-        log.close()
-        summary = [line for line in Path(log.name).read_text().splitlines() if "stopped:" in line]
-        if summary:
-            print("    monitor:", summary[-1].split("stopped: ", 1)[1])
-        os.unlink(log.name)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--samples", type=int, default=20_000)
-    parser.add_argument("--vehicles", default="1,10,100")
-    parser.add_argument("--total", type=int, default=30_000, help="vehicle-samples per throughput run")
-    parser.add_argument("--gains", help="gains file for paper-continuous (default: design one, ~5 s)")
+    parser.add_argument("--seconds", type=float, default=10.0, help="length of each paced run (default: 10)")
+    parser.add_argument("--skip-inprocess", action="store_true")
     args = parser.parse_args()
     os.environ.setdefault("RERUN_ANALYTICS", "0")
-    gains = make_gains(args.gains)
-    per_sample(gains, args.samples)
-    print("throughput of one `fault-monitor run` process (load generator in another process)")
-    for v in (int(x) for x in args.vehicles.split(",")):
-        rate, sent, answered = throughput(gains, v, max(1, args.total // v))
-        print(f"  {v:4d} vehicles: {rate:9.0f} vehicle-samples/s ({answered}/{sent} answered; target >= 10,000)")
+    workdir = Path(tempfile.mkdtemp(prefix="bench-monitor-"))
+    plant, gains = bench_plant(workdir)
+    if not args.skip_inprocess:
+        inprocess(plant, gains)
+    results: dict[tuple[str, str, int], tuple[list[float], int, int]] = {}
+    for vehicles in (10, 100):
+        for framing in ("one message per datagram", "packed"):
+            for kind in ("echo", "monitor"):
+                port = _free_udp_port()
+                proc = start_server(kind, port, plant, gains, str(workdir / f"{kind}.log"))
+                try:
+                    results[kind, framing, vehicles] = drive(port, vehicles, args.seconds, framing)
+                finally:
+                    stop_server(proc)
+                rtts, sent, answered = results[kind, framing, vehicles]
+                print(f"  {vehicles:3d} x 50 Hz, {framing:25s} {kind:8s}: round trip p50 {pct(rtts, 50):7.0f} us  "
+                      f"p99 {pct(rtts, 99):7.0f} us   answered {answered}/{sent} ({answered / sent:.2%})")
+            echo, mon = results["echo", framing, vehicles][0], results["monitor", framing, vehicles][0]
+            print(f"      -> monitor / echo p50 = {pct(mon, 50) / pct(echo, 50):.2f}x"
+                  + ("   (target <= 1.5x on one message per datagram)" if vehicles == 10 else
+                     "   (target: monitor answers >= 99 %)"))
+    summary = [line for line in (workdir / "monitor.log").read_text().splitlines() if "stopped:" in line]
+    if summary:
+        print("  last monitor summary:", summary[-1].split("stopped: ", 1)[1])
 
 
 if __name__ == "__main__":

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from operator import mul
 
 import numpy as np
 
@@ -68,10 +69,11 @@ class StepResult:
 class Estimator:
     """The FE/FTC law for one plant and one set of gains; state lives in ``EstimatorState``.
 
-    Why precomputed matrices: the live loop runs this per sample per vehicle, and for these tiny sizes
-    numpy's per-call overhead dominates. ``_U`` gives ``u = _U [z; y]`` and ``_O`` gives
-    ``[x_hat+; f_hat+; r] = _O [x_hat; f_hat; u(k-1); y; u(k)]``; the equations in the module docstring
-    are what they are built from and what the tests check.
+    Why precomputed matrices: the live loop runs this per sample per vehicle. ``_U`` gives
+    ``u = _U [z; y]`` and ``_O`` gives ``[x_hat+; f_hat+; r] = _O [x_hat; f_hat; u(k-1); y; u(k)]``; the
+    equations in the module docstring are what they are built from and what the tests check. Why the
+    products in plain Python over rows of floats: at these sizes (a handful of states) numpy's per-call
+    overhead is most of the cost; plain floats take a third of the time (benchmarks/bench_monitor.py).
     """
 
     def __init__(self, plant: Plant, gains: Gains, max_gap: int = 50, u_limit: float | None = None) -> None:
@@ -95,6 +97,9 @@ class Estimator:
         predict[:n, n + q :] = B0 + B1
         self._predict_T = predict
         self._m, self._N, self._nq = m, N, n + q
+        self._U_rows = self._U.tolist()
+        self._O_rows = self._O.tolist()
+        self._lim = float(self.u_limit) if self.u_limit is not None else None
 
     def initial_state(self) -> EstimatorState:
         p = self.plant
@@ -120,15 +125,18 @@ class Estimator:
             s.z[self._nq :] = u_prev
         return skipped
 
-    def _finish(self, s: EstimatorState, k: int, z: np.ndarray, y: np.ndarray, u: np.ndarray,
-                skipped: int) -> StepResult:
-        out = self._O @ np.concatenate((z, y, u))
+    def _finish(self, s: EstimatorState, k: int, v: list[float], u: list[float], skipped: int) -> StepResult:
+        """``v = [x_hat; f_hat; u(k-1); y]`` and the u(k) that acted: eq. (5), then the new state."""
+        w = v + u
+        out = [sum(map(mul, row, w)) for row in self._O_rows]
         nq = self._nq
-        z_next = np.concatenate((out[:nq], u))
-        reset = not all(math.isfinite(v) for v in z_next)
-        s.z = np.zeros(self._N) if reset else z_next
+        z_next = out[:nq] + u
+        reset = not all(map(math.isfinite, z_next))
+        z = s.z
+        s.z = np.zeros(self._N) if reset else np.array(z_next)
         s.k_last = k
-        return StepResult(k=k, u=u, x_hat=z[: s.n], f_hat=z[s.n : nq], residual=out[nq:], skipped=skipped, reset=reset)
+        return StepResult(k=k, u=np.array(u), x_hat=z[: s.n], f_hat=z[s.n : nq], residual=np.array(out[nq:]),
+                          skipped=skipped, reset=reset)
 
     def step(self, s: EstimatorState, k: int, y, u_prev=None) -> StepResult:
         """Process sample k in place and return the command. Raises ValueError for a stale or duplicate k.
@@ -136,14 +144,15 @@ class Estimator:
         ``u_prev``: the deflection the vehicle reports at k (None: the estimator's own last command).
         """
         skipped = self._advance(s, k, u_prev)
-        z = s.z
-        y = np.asarray(y, dtype=float).ravel()
-        u = self.saturate(self._U @ np.concatenate((z, y)))
-        return self._finish(s, k, z, y, u, skipped)
+        v = s.z.tolist() + [float(e) for e in np.ravel(y)]
+        u = [sum(map(mul, row, v)) for row in self._U_rows]
+        lim = self._lim
+        if lim is not None:
+            u = [lim if e > lim else -lim if e < -lim else e for e in u]
+        return self._finish(s, k, v, u, skipped)
 
     def observe(self, s: EstimatorState, k: int, y, u_now, u_prev=None) -> StepResult:
         """Observe-only: eq. (5) with the u(k) the vehicle's own controller issued (no command computed)."""
         skipped = self._advance(s, k, u_prev)
-        z = s.z
-        y = np.asarray(y, dtype=float).ravel()
-        return self._finish(s, k, z, y, np.asarray(u_now, dtype=float).ravel(), skipped)
+        v = s.z.tolist() + [float(e) for e in np.ravel(y)]
+        return self._finish(s, k, v, [float(e) for e in np.ravel(u_now)], skipped)

@@ -140,3 +140,9 @@ def test_signed_frames_verify_both_ways_and_replays_are_refused_across_peers() -
     receiver.signing.allow_unsigned_callback = None
     ours = command_frame(FrameEncoder(255, 191, Signer(KEY)), default_signal_map().command, 2, 0, [1.0])
     assert [m.get_type() for m in receiver.parse_buffer(ours)] == ["SET_ACTUATOR_CONTROL_TARGET"]
+
+
+def test_values_beyond_float32_are_sent_as_infinity_not_a_crash() -> None:
+    frame = fhat_frames(FrameEncoder(255, 191), 0, [1e300])
+    msg = new_codec(1, 1).parse_buffer(frame)[0]
+    assert msg.value == float("inf")

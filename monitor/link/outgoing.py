@@ -9,6 +9,8 @@ the way back). Every frame comes from the link's ``FrameEncoder``: its sequence 
 
 from __future__ import annotations
 
+import math
+
 from monitor.link.dialect import layout_by_name, mavlink
 from monitor.link.frames import FrameEncoder
 from monitor.link.signals import CommandMap
@@ -24,6 +26,15 @@ _COMMAND = layout_by_name("SET_ACTUATOR_CONTROL_TARGET")
 _NAMED_FLOAT = layout_by_name("NAMED_VALUE_FLOAT")
 _STATUSTEXT = layout_by_name("STATUSTEXT")
 _HEARTBEAT = layout_by_name("HEARTBEAT")
+_FLOAT32_MAX = 3.4028234663852886e38
+
+
+def _f32(value) -> float:
+    """A value MAVLink's float32 can carry: beyond its range, the infinity of the same sign (never a crash)."""
+    v = float(value)
+    return v if -_FLOAT32_MAX <= v <= _FLOAT32_MAX or v != v else math.copysign(math.inf, v)
+
+
 _HEARTBEAT_VALUES = (0, mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0,
                      mavlink.MAV_STATE_ACTIVE, 3)
 
@@ -32,7 +43,7 @@ def command_frame(enc: FrameEncoder, cmd: CommandMap, sysid: int, time_usec: int
     """The command for ``sysid`` answering the instant ``time_usec``; ``u`` in plant units, already saturated."""
     controls = [0.0] * 8
     for channel, scale, value in zip(cmd.channels, cmd.full_scale, u):
-        controls[channel] = float(value) / scale
+        controls[channel] = _f32(float(value) / scale)
     return enc.encode(_COMMAND, (time_usec, *controls, cmd.group, sysid, VEHICLE_COMPONENT))
 
 
@@ -44,7 +55,7 @@ def fhat_frames(enc: FrameEncoder, time_usec: int, f_hat) -> bytes:
     """One ``NAMED_VALUE_FLOAT`` per fault channel, concatenated (one datagram)."""
     ms = (time_usec // 1000) & 0xFFFFFFFF
     n = len(f_hat)
-    return b"".join(enc.encode(_NAMED_FLOAT, (ms, float(v), fhat_name(i, n))) for i, v in enumerate(f_hat))
+    return b"".join(enc.encode(_NAMED_FLOAT, (ms, _f32(v), fhat_name(i, n))) for i, v in enumerate(f_hat))
 
 
 def alarm_text_frame(enc: FrameEncoder, sysid: int, state: str, magnitude: float, unit: str) -> bytes:
