@@ -65,7 +65,7 @@ actuator = ["elevator"]
 [signals.measured]
 alpha = { field = "AOA_SSA.AOA", unit = "deg" }
 q = { field = "ATTITUDE.pitchspeed", scale = 57.29577951308232, unit = "deg/s" }
-elevator = { field = "SERVO_OUTPUT_RAW.servo2_raw", scale = 0.06, unit = "deg" }
+elevator = { field = "SERVO_OUTPUT_RAW.servo2_raw", scale = 0.06, offset = -90.0, unit = "deg" }
 [signals.command]
 channels = [4]
 full_scale = [25.0]
@@ -77,6 +77,7 @@ def test_a_plant_file_carries_its_own_map_and_the_hash_ignores_it() -> None:
     sig = signals_for_plant(plant)
     assert sig.outputs == ("alpha", "q") and sig.messages(False) == ("AOA_SSA", "ATTITUDE")
     assert sig.measured["elevator"].message == "SERVO_OUTPUT_RAW" and sig.command.channels == (4,)
+    assert sig.measured["elevator"].scale * 2000 + sig.measured["elevator"].offset == 30.0
     assert sig.time_fields["SERVO_OUTPUT_RAW"][1] == 1  # time_usec
     without = parse_plant(SECOND_AIRFRAME.split("[signals]")[0], "airframe.toml")
     assert without.digest == plant.digest

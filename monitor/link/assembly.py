@@ -33,7 +33,7 @@ _GIVE_UP_AFTER = 3  # consecutive waits for an actuator report that expired
 
 
 class AssembledSample:
-    """One vehicle's signals at one sampling instant, in plant units (``scale`` applied)."""
+    """One vehicle's signals at one sampling instant, in plant units (``scale`` and ``offset`` applied)."""
 
     __slots__ = ("k", "time_usec", "values", "route", "ready_at")
 
@@ -87,11 +87,11 @@ class SampleAssembler:
         self.actuator_messages = frozenset(signals.actuator_messages())
         self.expect_actuator = observe
         self._timeouts = 0
-        self._parts: dict[str, tuple[int, int, tuple[tuple[str, int, float], ...]]] = {}
+        self._parts: dict[str, tuple[int, int, tuple[tuple[str, int, float, float], ...]]] = {}
         for name, sig in signals.measured.items():
             t_pos, unit_us = signals.time_fields[sig.message]
             prev = self._parts.get(sig.message, (t_pos, unit_us, ()))
-            self._parts[sig.message] = (t_pos, unit_us, prev[2] + ((name, sig.position, sig.scale),))
+            self._parts[sig.message] = (t_pos, unit_us, prev[2] + ((name, sig.position, sig.scale, sig.offset),))
         if signals.instant not in self._parts:
             self._parts[signals.instant] = (*signals.time_fields[signals.instant], ())
         self._pending: dict[int, _Slot] = {}
@@ -151,8 +151,8 @@ class SampleAssembler:
             c.duplicate_parts += 1
             return []
         slot.messages.add(message)
-        for name, pos, scale in signals:
-            slot.values[name] = scale * values[pos]
+        for name, pos, scale, offset in signals:
+            slot.values[name] = scale * values[pos] + offset
         if message == self.signals.instant:
             slot.time_usec = t_us
             slot.route = route

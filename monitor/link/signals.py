@@ -8,7 +8,7 @@ A ``[signals]`` table in the plant file, or a file of its own (``--signals FILE`
     actuator = ["elevator"]                # u_1 .. u_m as the vehicle reports them
     record = ["alpha", "q", "elevator"]    # recorded as /vehicle/<id>/measured/<name> (default: all)
 
-    [signals.measured]                     # name = { field = "MESSAGE.field[index]", scale, unit }
+    [signals.measured]                     # name = { field = "MESSAGE.field[index]", scale, offset, unit }
     alpha = { field = "AOA_SSA.AOA", unit = "deg" }
     q = { field = "ATTITUDE.pitchspeed", scale = 57.29577951308232, unit = "deg/s" }
     elevator = { field = "ACTUATOR_OUTPUT_STATUS.actuator[0]", unit = "deg" }
@@ -19,7 +19,8 @@ A ``[signals]`` table in the plant file, or a file of its own (``--signals FILE`
     full_scale = [30.0]                    # plant units per normalised unit (controls are in [-1, 1])
     group = 0
 
-A value in plant units is ``scale * MESSAGE.field[index]``. Each message used must carry ``time_usec``
+A value in plant units is ``scale * MESSAGE.field[index] + offset`` (e.g. a servo PWM in us:
+``scale = 0.06, offset = -90`` maps 1000..2000 us to -30..30 deg). Each message used must carry ``time_usec``
 or ``time_boot_ms``: that is how parts of one sampling instant are matched (contract: AOA_SSA's
 ``time_usec`` is the instant, ATTITUDE matches by ``time_boot_ms``, ACTUATOR_OUTPUT_STATUS by
 ``time_usec``). Anything unknown (a message, a field, an index, a key) is a one-line error naming it.
@@ -61,14 +62,14 @@ group = 0
 """
 
 _TOP_KEYS = {"instant", "outputs", "actuator", "record", "measured", "command"}
-_SIGNAL_KEYS = {"field", "scale", "unit"}
+_SIGNAL_KEYS = {"field", "scale", "offset", "unit"}
 _COMMAND_KEYS = {"message", "channels", "full_scale", "group"}
 _COMMAND_MESSAGES = {"SET_ACTUATOR_CONTROL_TARGET": ("controls", 8)}
 
 
 @dataclass(frozen=True)
 class Signal:
-    """One measured value: ``scale * message.field[index]`` in ``unit``."""
+    """One measured value: ``scale * message.field[index] + offset`` in ``unit``."""
 
     name: str
     message: str
@@ -77,6 +78,7 @@ class Signal:
     position: int  # flat position in the message's unpacked payload
     scale: float
     unit: str
+    offset: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -176,17 +178,20 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int) -> SignalMap
             spec = {"field": spec}
         bad = sorted(set(spec) - _SIGNAL_KEYS)
         if bad:
-            raise UserError(f"{w}: unknown key '{bad[0]}' (known: field, scale, unit)")
+            raise UserError(f"{w}: unknown key '{bad[0]}' (known: field, scale, offset, unit)")
         layout, field, index = _field_ref(spec.get("field"), w)
         scale = spec.get("scale", 1.0)
         if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale == 0:
             raise UserError(f"{w}: 'scale' must be a finite non-zero number")
+        offset = spec.get("offset", 0.0)
+        if isinstance(offset, bool) or not isinstance(offset, (int, float)) or not math.isfinite(offset):
+            raise UserError(f"{w}: 'offset' must be a finite number")
         stamp = layout.time_field()
         if stamp is None:
             raise UserError(f"{w}: {layout.name} has no time_usec or time_boot_ms to match it to a sampling instant")
         time_fields[layout.name] = (layout.position(stamp[0]), stamp[1])
         measured[name] = Signal(name, layout.name, field, index, layout.position(field, index), float(scale),
-                                str(spec.get("unit", "")))
+                                str(spec.get("unit", "")), float(offset))
     instant = raw.get("instant")
     instant_layout = layout_by_name(instant) if isinstance(instant, str) else None
     if instant_layout is None:
