@@ -75,13 +75,12 @@ class SampleAssembler:
     """The parts of one vehicle's samples; ``add`` and ``poll`` return the samples ready, oldest first."""
 
     def __init__(self, signals: SignalMap, h: float, observe: bool = False, wait_s: float = 0.02,
-                 max_pending: int = 16, max_ahead: int | None = None) -> None:
+                 max_pending: int = 16) -> None:
         self.signals = signals
         self.h_us = h * 1e6
         self.observe = observe
         self.wait_s = wait_s
         self.max_pending = max_pending
-        self.max_ahead = max_ahead
         self.counters = AssemblyCounters()
         self.required = frozenset(signals.messages(observe))
         self.actuator_messages = frozenset(signals.actuator_messages())
@@ -113,8 +112,20 @@ class SampleAssembler:
             diff -= _MS_WRAP
         return (base + diff) * unit_us
 
-    def add(self, message: str, values: tuple, route: object, now: float) -> list[AssembledSample]:
-        """File one decoded message (``values``: its unpacked payload) under its instant."""
+    def index_of(self, message: str, values: tuple) -> int | None:
+        """The sample index a message of this vehicle belongs to (None if the map does not use it)."""
+        spec = self._parts.get(message)
+        if spec is None:
+            return None
+        return int(round(self._instant_us(int(values[spec[0]]), spec[1]) / self.h_us))
+
+    def add(self, message: str, values: tuple, route: object, now: float,
+            max_k: int | None = None) -> list[AssembledSample]:
+        """File one decoded message (``values``: its unpacked payload) under its instant.
+
+        ``max_k``: the newest instant the vehicle's clock can have reached; parts beyond it are refused
+        (``future``), so a forged far-future stamp can neither be processed nor lock later samples out.
+        """
         spec = self._parts.get(message)
         if spec is None:
             return []
@@ -123,6 +134,9 @@ class SampleAssembler:
         t_us = self._instant_us(int(values[t_pos]), unit_us)
         k = int(round(t_us / self.h_us))
         c = self.counters
+        if max_k is not None and k > max_k:
+            c.future += 1
+            return []
         if message in self.actuator_messages and not self.expect_actuator:
             self.expect_actuator = True  # it reports its actuator: from now on that report is waited for
         if self.last_k is not None:
@@ -133,9 +147,6 @@ class SampleAssembler:
                     c.duplicates += 1
                 else:
                     c.stale += 1
-                return []
-            if self.max_ahead is not None and k > self.last_k + self.max_ahead:
-                c.future += 1
                 return []
         slot = self._pending.get(k)
         if slot is None:

@@ -19,7 +19,9 @@ A ``[signals]`` table in the plant file, or a file of its own (``--signals FILE`
     full_scale = [30.0]                    # plant units per normalised unit (controls are in [-1, 1])
     group = 0
 
-A value in plant units is ``scale * MESSAGE.field[index] + offset`` (e.g. a servo PWM in us:
+``range = [low, high]`` is the signal's physical envelope: a sample whose estimator inputs are not finite
+or fall outside it is rejected (counted) before the estimator. A value in plant units is
+``scale * MESSAGE.field[index] + offset`` (e.g. a servo PWM in us:
 ``scale = 0.06, offset = -90`` maps 1000..2000 us to -30..30 deg). Each message used must carry ``time_usec``
 or ``time_boot_ms``: that is how parts of one sampling instant are matched (contract: AOA_SSA's
 ``time_usec`` is the instant, ATTITUDE matches by ``time_boot_ms``, ACTUATOR_OUTPUT_STATUS by
@@ -50,9 +52,9 @@ outputs = ["alpha"]
 actuator = ["elevator"]
 
 [signals.measured]
-alpha = { field = "AOA_SSA.AOA", unit = "deg" }
-q = { field = "ATTITUDE.pitchspeed", scale = 57.29577951308232, unit = "deg/s" }
-elevator = { field = "ACTUATOR_OUTPUT_STATUS.actuator[0]", unit = "deg" }
+alpha = { field = "AOA_SSA.AOA", unit = "deg", range = [-90.0, 90.0] }
+q = { field = "ATTITUDE.pitchspeed", scale = 57.29577951308232, unit = "deg/s", range = [-2000.0, 2000.0] }
+elevator = { field = "ACTUATOR_OUTPUT_STATUS.actuator[0]", unit = "deg", range = [-90.0, 90.0] }
 
 [signals.command]
 message = "SET_ACTUATOR_CONTROL_TARGET"
@@ -62,7 +64,7 @@ group = 0
 """
 
 _TOP_KEYS = {"instant", "outputs", "actuator", "record", "measured", "command"}
-_SIGNAL_KEYS = {"field", "scale", "offset", "unit"}
+_SIGNAL_KEYS = {"field", "scale", "offset", "unit", "range"}
 _COMMAND_KEYS = {"message", "channels", "full_scale", "group"}
 _COMMAND_MESSAGES = {"SET_ACTUATOR_CONTROL_TARGET": ("controls", 8)}
 
@@ -79,6 +81,7 @@ class Signal:
     scale: float
     unit: str
     offset: float = 0.0
+    range: tuple[float, float] | None = None  # the physical envelope, plant units (None: any finite value)
 
 
 @dataclass(frozen=True)
@@ -108,6 +111,22 @@ class SignalMap:
         if observe:
             names += [self.measured[s].message for s in self.actuator]
         return tuple(dict.fromkeys(names))
+
+    def reject_reason(self, values: dict[str, float]) -> str | None:
+        """Why a sample's values cannot go to the estimator (non-finite or outside a signal's range), or None.
+
+        Only the signals the estimator uses are judged; a bad recorded-only signal is dropped by the caller.
+        """
+        for name in (*self.outputs, *self.actuator):
+            v = values.get(name)
+            if v is None:
+                continue
+            if not math.isfinite(v):
+                return f"{name} = {v}"
+            bounds = self.measured[name].range
+            if bounds is not None and not bounds[0] <= v <= bounds[1]:
+                return f"{name} = {v:.6g} outside [{bounds[0]:g}, {bounds[1]:g}]"
+        return None
 
     def actuator_messages(self) -> tuple[str, ...]:
         return tuple(dict.fromkeys(self.measured[s].message for s in self.actuator))
@@ -178,7 +197,7 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int) -> SignalMap
             spec = {"field": spec}
         bad = sorted(set(spec) - _SIGNAL_KEYS)
         if bad:
-            raise UserError(f"{w}: unknown key '{bad[0]}' (known: field, scale, offset, unit)")
+            raise UserError(f"{w}: unknown key '{bad[0]}' (known: field, scale, offset, unit, range)")
         layout, field, index = _field_ref(spec.get("field"), w)
         scale = spec.get("scale", 1.0)
         if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale == 0:
@@ -190,8 +209,15 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int) -> SignalMap
         if stamp is None:
             raise UserError(f"{w}: {layout.name} has no time_usec or time_boot_ms to match it to a sampling instant")
         time_fields[layout.name] = (layout.position(stamp[0]), stamp[1])
+        bounds = spec.get("range")
+        if bounds is not None:
+            if (not isinstance(bounds, list) or len(bounds) != 2 or
+                    not all(isinstance(b, (int, float)) and not isinstance(b, bool) and math.isfinite(b) for b in bounds)
+                    or not bounds[0] < bounds[1]):
+                raise UserError(f"{w}: 'range' must be [low, high] with finite low < high")
+            bounds = (float(bounds[0]), float(bounds[1]))
         measured[name] = Signal(name, layout.name, field, index, layout.position(field, index), float(scale),
-                                str(spec.get("unit", "")), float(offset))
+                                str(spec.get("unit", "")), float(offset), bounds)
     instant = raw.get("instant")
     instant_layout = layout_by_name(instant) if isinstance(instant, str) else None
     if instant_layout is None:

@@ -102,6 +102,8 @@ def _guarded(handler: FrameHandler, route: tuple, frames: list[RawFrame], t0: in
 class Link:
     """One connection: a parser per byte stream, an encoder for what we send, heartbeats for its peers."""
 
+    datagram = False  # datagram links get the per-datagram caps (monitor/service/pipeline.py)
+
     def __init__(self, spec: ConnectionSpec, index: int, handler: FrameHandler, counters: FrameCounters,
                  signer: Signer | None) -> None:
         self.spec = spec
@@ -146,6 +148,7 @@ class UdpLink(Link):
     """
 
     burst = 64
+    datagram = True
 
     def __init__(self, *args, max_peers: int = 1024, peer_timeout: float = 30.0, **kwargs) -> None:
         super().__init__(*args, **kwargs)

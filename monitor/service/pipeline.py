@@ -30,6 +30,7 @@ __all__ = ["Pipeline", "MessageCounters", "percentile"]
 log = logging.getLogger("monitor.run")
 
 _HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
+MAX_FRAMES_PER_DATAGRAM = 32  # a 64 KB datagram can pack ~800 frames: the rest is counted, not processed
 
 
 def percentile(values, p: float) -> float | None:
@@ -43,6 +44,7 @@ def percentile(values, p: float) -> float | None:
 class MessageCounters:
     heartbeats: int = 0
     foreign: int = 0  # valid messages no signal map uses (routers forward plenty of them)
+    excess: int = 0  # frames beyond the per-datagram cap, and samples beyond one per vehicle per datagram
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -72,10 +74,17 @@ class Pipeline:
     # --- hot path ------------------------------------------------------------------------------------
     def on_frames(self, route: object, frames: list[RawFrame], t0_ns: int, now: float | None = None,
                   wall: float | None = None) -> None:
+        """Frames of one read. On a datagram link at most one sample per vehicle is processed per datagram
+        and at most ``MAX_FRAMES_PER_DATAGRAM`` frames are looked at: one packet must not buy many answers."""
         if now is None:
             now = time.monotonic()
         if wall is None:
             wall = time.time()
+        datagram = route is not None and getattr(route[0], "datagram", False)
+        if datagram and len(frames) > MAX_FRAMES_PER_DATAGRAM:
+            self.messages.excess += len(frames) - MAX_FRAMES_PER_DATAGRAM
+            frames = frames[:MAX_FRAMES_PER_DATAGRAM]
+        answered: set[int] | None = set() if datagram else None
         wanted = self._wanted
         for msgid, sysid, _compid, payload in frames:
             entry = wanted.get(msgid)
@@ -87,20 +96,28 @@ class Pipeline:
                 continue
             name, layout = entry
             for vehicle, sample in self.table.message(sysid, name, layout.decode(payload), route, now):
-                self._handle(vehicle, sample, wall, t0_ns)
+                if answered is not None:
+                    if sysid in answered:
+                        self.messages.excess += 1
+                        continue
+                    answered.add(sysid)
+                self._handle(vehicle, sample, now, wall, t0_ns)
 
     def poll(self, now: float | None = None, wall: float | None = None) -> None:
         """Process samples whose wait for an actuator report ran out (called every few ms by the daemon)."""
-        for vehicle, sample in self.table.poll(time.monotonic() if now is None else now):
-            self._handle(vehicle, sample, time.time() if wall is None else wall, time.perf_counter_ns())
+        now = time.monotonic() if now is None else now
+        for vehicle, sample in self.table.poll(now):
+            self._handle(vehicle, sample, now, time.time() if wall is None else wall, time.perf_counter_ns())
 
     def flush(self, now: float, wall: float) -> None:
         """End of input (a log): process every sample still waiting for its actuator report."""
         for vehicle, sample in self.table.flush(now):
-            self._handle(vehicle, sample, wall, time.perf_counter_ns())
+            self._handle(vehicle, sample, now, wall, time.perf_counter_ns())
 
-    def _handle(self, vehicle: Vehicle, sample, wall: float, t0_ns: int) -> None:
-        p = self.table.process(vehicle, sample, wall)
+    def _handle(self, vehicle: Vehicle, sample, now: float, wall: float, t0_ns: int) -> None:
+        p = self.table.process(vehicle, sample, wall, now)
+        if p is None:
+            return
         r = p.result
         route = sample.route
         if route is not None:
@@ -118,7 +135,8 @@ class Pipeline:
                 self.feedback_sent += 1
         raised = vehicle.alarm.raised
         if self.publisher is not None:
-            self.publisher.estimate((vehicle.sysid, r.k, p.t, r.f_hat, r.x_hat, r.residual, r.u, p.tau_obs, raised))
+            self.publisher.estimate((vehicle.sysid, r.k, p.t, r.f_hat, r.x_hat, r.residual, r.u, p.tau_obs, raised,
+                                     p.command_applied, vehicle.commands_effective))
             if p.alarm_event is not None:
                 self.publisher.alarm(vehicle.sysid, r.k, p.t, p.alarm_event, r.f_hat)
         if p.alarm_event is not None:
@@ -152,9 +170,10 @@ class Pipeline:
         p50, p99 = percentile(self.processing_s, 50), percentile(self.processing_s, 99)
         timing = (f"processing p50 {p50 * 1e6:.0f} us, p99 {p99 * 1e6:.0f} us" if p50 is not None
                   else "no processing times")
-        order = ("processed", "duplicates", "stale", "incomplete", "late_parts", "waited_out", "no_report", "garbage",
-                 "truncated", "bad_signature", "wrong_dialect", "foreign", "refused", "skipped", "vehicles_seen",
-                 "restarts", "resets", "commands", "feedback", "published", "publish_drops")
+        order = ("processed", "duplicates", "stale", "incomplete", "late_parts", "waited_out", "no_report",
+                 "not_applied", "rejected_values", "future", "foreign_source", "excess", "garbage", "truncated",
+                 "bad_signature", "wrong_dialect", "foreign", "refused", "skipped", "vehicles_seen", "restarts",
+                 "resets", "commands", "feedback", "published", "publish_drops")
         names = {"processed": "samples processed", "vehicles_seen": "vehicles"}
         parts = [f"{names.get(key, key.replace('_', ' '))} {c[key]}" for key in order if key in c]
         return ", ".join(parts) + f"; {timing}"

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import collections
 import threading
 import time
@@ -29,20 +30,31 @@ log = logging.getLogger(__name__)
 
 _JSON = zenoh.Encoding.APPLICATION_JSON
 
-# (sysid, k, t, f_hat, x_hat, residual, u, tau, alarm): built in the loop from references, no conversions
+# (sysid, k, t, f_hat, x_hat, residual, u, tau, alarm, command_applied, commands_effective): built in the loop
+# from references, no conversions
 EstimateItem = tuple
 
 
+def _finite(values) -> list[float | None]:
+    """Strict JSON has no NaN or Infinity: a non-finite number is sent as null."""
+    return [v if math.isfinite(v) else None for v in map(float, values)]
+
+
 def estimate_payload(item: EstimateItem, unit: str) -> dict[str, Any]:
-    """The contract's ``fault/estimate`` payload (plant units; ``tau`` = observed delay in seconds or null)."""
-    sysid, k, t, f_hat, x_hat, residual, u, tau, alarm = item
-    return {"sysid": sysid, "k": k, "t": t, "f_hat": f_hat.tolist(), "x_hat": x_hat.tolist(),
-            "residual": residual.tolist(), "u": u.tolist(), "tau": tau, "alarm": alarm, "unit": unit}
+    """The contract's ``fault/estimate`` payload (plant units; ``tau`` = observed delay in seconds or null).
+
+    Beyond the contract: ``command_applied`` (did the previous command act, per the vehicle's actuator
+    report; null when it cannot be told) and ``commands_effective`` (false while most recent ones did not).
+    """
+    sysid, k, t, f_hat, x_hat, residual, u, tau, alarm, applied, effective = item
+    return {"sysid": sysid, "k": k, "t": t, "f_hat": _finite(f_hat), "x_hat": _finite(x_hat),
+            "residual": _finite(residual), "u": _finite(u), "tau": tau, "alarm": alarm, "unit": unit,
+            "command_applied": applied, "commands_effective": effective}
 
 
 def alarm_payload(sysid: int, k: int, t: float, state: str, f_hat) -> dict[str, Any]:
     """The contract's ``fault/alarm`` payload; ``state`` is "raised" or "cleared"."""
-    return {"sysid": sysid, "k": k, "t": t, "state": state, "f_hat": [float(f) for f in f_hat]}
+    return {"sysid": sysid, "k": k, "t": t, "state": state, "f_hat": _finite(f_hat)}
 
 
 class EstimatePublisher:
@@ -107,7 +119,7 @@ class EstimatePublisher:
             else:
                 payload = estimate_payload(item, self.unit)
                 key = f"{self.prefix}/{item[0]}/fault/estimate"
-            self._publisher(key).put(json.dumps(payload))
+            self._publisher(key).put(json.dumps(payload, allow_nan=False))
             self.published += 1
         except Exception as exc:  # a closed session or a bad value costs a log line, not the thread
             log.debug("publish failed: %s", exc)
@@ -119,7 +131,7 @@ class EstimatePublisher:
             for sysid, item in list(self.latest.items()):
                 key = f"{self.prefix}/{sysid}/fault/status"
                 if wanted.intersects(zenoh.KeyExpr(key)):
-                    query.reply(key, json.dumps(estimate_payload(item, self.unit)), encoding=_JSON)
+                    query.reply(key, json.dumps(estimate_payload(item, self.unit), allow_nan=False), encoding=_JSON)
         except Exception as exc:
             log.debug("status query failed: %s", exc)
 

@@ -19,7 +19,9 @@ map that names a message the vehicle does not send; a silent monitor would look 
 from __future__ import annotations
 
 import logging
+import math
 import tomllib
+from collections import deque
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -41,6 +43,11 @@ __all__ = ["VehicleModel", "Fleet", "load_model", "load_fleet", "Vehicle", "Proc
 log = logging.getLogger(__name__)
 
 MISSING_WARNING_S = 3.0  # a vehicle heard for this long without one sample gets a WARNING (checked at 1 Hz)
+APPLIED_WINDOW = 10  # commands judged applied or not, per vehicle
+NOT_APPLIED_ENTER = 5  # this many of the window not applied: the monitor says its commands do not act
+APPLIED_TOLERANCE = 1e-3  # relative: float32 on the wire twice (command, report) is ~1e-7
+MAX_SPEEDUP = 100.0  # a vehicle's clock runs at most this much faster than ours (simulators with --speedup)
+FUTURE_SLACK = 10  # samples a vehicle's clock may be ahead beyond that (jitter, lost samples)
 
 
 @dataclass(frozen=True, eq=False)
@@ -137,7 +144,8 @@ class Vehicle:
     """One vehicle's loop: assembler, estimator state, alarm, observed delay, where to answer."""
 
     __slots__ = ("sysid", "model", "state", "alarm", "delay", "assembler", "route", "last_seen", "first_seen",
-                 "processed", "skipped", "warned_missing", "last_command", "no_report")
+                 "processed", "skipped", "warned_missing", "last_command", "last_command_k", "no_report", "rejected",
+                 "last_reject_log", "applied", "commands_effective", "not_applied", "last_sample_at")
 
     def __init__(self, sysid: int, model: VehicleModel, alarm: AlarmConfig, route: object, now: float,
                  observe: bool, wait_s: float) -> None:
@@ -149,9 +157,14 @@ class Vehicle:
         self.assembler = SampleAssembler(model.signals, model.plant.h, observe=observe, wait_s=wait_s)
         self.route = route
         self.last_seen = self.first_seen = now
-        self.processed = self.skipped = self.no_report = 0
+        self.processed = self.skipped = self.no_report = self.rejected = self.not_applied = 0
         self.warned_missing = False
-        self.last_command: np.ndarray | None = None
+        self.last_command: list[float] | None = None
+        self.last_command_k: int | None = None
+        self.last_reject_log = -1e9
+        self.applied: deque[bool] = deque(maxlen=APPLIED_WINDOW)  # were the last commands seen to act?
+        self.commands_effective = True
+        self.last_sample_at: float | None = None
 
 
 @dataclass
@@ -164,6 +177,9 @@ class TableCounters:
     restarts: int = 0
     no_report: int = 0  # samples without an actuator report: u(k-1) = the monitor's own last command
     resets: int = 0  # estimator states that became non-finite and were reset
+    rejected_values: int = 0  # samples whose estimator inputs were non-finite or outside their range
+    foreign_source: int = 0  # messages claiming a vehicle's sysid from another link/peer while it is live
+    not_applied: int = 0  # commands the next sample's actuator report shows did not act
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -172,10 +188,11 @@ class TableCounters:
 class Processed:
     """The outcome of one processed sample, for the reply, the publishers and the recorder."""
 
-    __slots__ = ("vehicle", "sample", "result", "t", "y", "tau_obs", "alarm_event", "f_mag")
+    __slots__ = ("vehicle", "sample", "result", "t", "y", "tau_obs", "alarm_event", "f_mag", "command_applied")
 
     def __init__(self, vehicle: Vehicle, sample: AssembledSample, result: StepResult, t: float, y: list[float],
-                 tau_obs: float | None, alarm_event: str | None, f_mag: float) -> None:
+                 tau_obs: float | None, alarm_event: str | None, f_mag: float,
+                 command_applied: bool | None = None) -> None:
         self.vehicle = vehicle
         self.sample = sample
         self.result = result
@@ -184,6 +201,7 @@ class Processed:
         self.tau_obs = tau_obs
         self.alarm_event = alarm_event
         self.f_mag = f_mag
+        self.command_applied = command_applied  # did the previous command act (None: cannot tell)?
 
 
 class VehicleTable:
@@ -220,24 +238,38 @@ class VehicleTable:
         return vehicle
 
     def message(self, sysid: int, name: str, values: tuple, route: object, now: float) -> list[tuple[Vehicle, AssembledSample]]:
-        """File one decoded message; returns the samples it completed (oldest first)."""
+        """File one decoded message; returns the samples it completed (oldest first).
+
+        Who may speak for a vehicle: the link and peer it is bound to. While that source is live
+        (heard within ``restart_silence``), the same sysid from anywhere else is refused and counted; after
+        that silence a new source takes over (a restart when its k goes backwards: fresh estimator).
+        """
         vehicle = self.vehicles.get(sysid)
         if vehicle is None:
             vehicle = self._create(sysid, name, route, now)
             if vehicle is None:
                 return []
         asm = vehicle.assembler
-        if (name == asm.signals.instant and route != vehicle.route and asm.last_k is not None
-                and now - vehicle.last_seen >= self.restart_silence):
-            k = int(round(int(values[asm.signals.time_fields[name][0]]) / asm.h_us))
-            if k < asm.last_k:
+        if route != vehicle.route:
+            if now - vehicle.last_seen < self.restart_silence:
+                self.counters.foreign_source += 1
+                return []
+            k = asm.index_of(name, values)
+            if name == asm.signals.instant and asm.last_k is not None and k is not None and k < asm.last_k:
                 log.info("vehicle sysid %d restarted (new source %s, k %d -> %d): fresh estimator",
                          sysid, _where(route), asm.last_k, k)
                 self.counters.restarts += 1
                 self._retire(sysid)
                 return self.message(sysid, name, values, route, now)
+            log.info("vehicle sysid %d now speaks from %s (was %s, silent %.1f s)", sysid, _where(route),
+                     _where(vehicle.route), now - vehicle.last_seen)
+            vehicle.route = route
+        max_k = None
+        if asm.last_k is not None and vehicle.last_sample_at is not None:
+            ahead = (now - vehicle.last_sample_at) * MAX_SPEEDUP / vehicle.model.plant.h
+            max_k = asm.last_k + FUTURE_SLACK + int(min(ahead, 1e9))
         vehicle.last_seen = now
-        ready = asm.add(name, values, route, now)
+        ready = asm.add(name, values, route, now, max_k)
         return [(vehicle, s) for s in ready]
 
     def poll(self, now: float) -> list[tuple[Vehicle, AssembledSample]]:
@@ -254,15 +286,32 @@ class VehicleTable:
             out.extend((v, s) for s in v.assembler.flush(now))
         return out
 
-    def process(self, vehicle: Vehicle, sample: AssembledSample, wall: float) -> Processed:
-        """Step the vehicle's estimator on one assembled sample (control or observe-only)."""
+    def process(self, vehicle: Vehicle, sample: AssembledSample, wall: float, now: float | None = None) -> Processed | None:
+        """Step the vehicle's estimator on one assembled sample (control or observe-only).
+
+        None when the values gate refuses the sample: a non-finite or out-of-envelope input never reaches
+        the estimator (the estimator then predicts over the missing sample, as for a lost one).
+        """
         model = vehicle.model
         sig = model.signals
         values = sample.values
+        vehicle.last_sample_at = now if now is not None else vehicle.last_seen
+        reason = sig.reject_reason(values)
+        if reason is not None:
+            vehicle.rejected += 1
+            self.counters.rejected_values += 1
+            if vehicle.last_sample_at - vehicle.last_reject_log >= 10.0:
+                vehicle.last_reject_log = vehicle.last_sample_at
+                log.warning("vehicle sysid %d: sample k=%d rejected before the estimator (%s); %d so far",
+                            vehicle.sysid, sample.k, reason, vehicle.rejected)
+            return None
+        for name in [n for n, v in values.items() if not math.isfinite(v)]:
+            del values[name]  # a non-finite recorded-only signal is not recorded
         y = [values[name] for name in sig.outputs]
         report = [values[name] for name in sig.actuator if name in values]
         u_report = report if len(report) == len(sig.actuator) else None
         est = model.estimator
+        applied = None
         if self.observe:
             # u(k) issued by the vehicle is in this sample's report; u(k-1) stays from the previous one
             result = est.observe(vehicle.state, sample.k, y, u_report)
@@ -270,8 +319,11 @@ class VehicleTable:
             if u_report is None:
                 vehicle.no_report += 1
                 self.counters.no_report += 1
+            else:
+                applied = self._judge_applied(vehicle, sample.k, u_report)
             result = est.step(vehicle.state, sample.k, y, u_prev=u_report)
-            vehicle.last_command = result.u
+            vehicle.last_command = result.u.tolist()
+            vehicle.last_command_k = sample.k
         if result.reset:
             self.counters.resets += 1
             log.error("vehicle sysid %d: estimator state became non-finite at k=%d; reset to zero", vehicle.sysid,
@@ -286,7 +338,27 @@ class VehicleTable:
         f_mag = max(abs(float(f)) for f in result.f_hat)
         event = vehicle.alarm.update(f_mag)
         tau_obs = vehicle.delay.update(t, wall)
-        return Processed(vehicle, sample, result, t, y, tau_obs, event, f_mag)
+        return Processed(vehicle, sample, result, t, y, tau_obs, event, f_mag, applied)
+
+    def _judge_applied(self, vehicle: Vehicle, k: int, reported: list[float]) -> bool | None:
+        """Did the command for k-1 act? The deflection reported at k says so; a streak says it to the log."""
+        if vehicle.last_command is None or vehicle.last_command_k != k - 1:
+            return None
+        applied = all(abs(r - c) <= APPLIED_TOLERANCE * max(1.0, abs(c)) for r, c in zip(reported, vehicle.last_command))
+        vehicle.applied.append(applied)
+        if not applied:
+            vehicle.not_applied += 1
+            self.counters.not_applied += 1
+        misses = vehicle.applied.count(False)
+        if vehicle.commands_effective and misses >= NOT_APPLIED_ENTER:
+            vehicle.commands_effective = False
+            log.warning("vehicle sysid %d: its commands are not taking effect (%d of the last %d not applied: late, "
+                        "lost or rejected); the estimator steps with the deflection it reports", vehicle.sysid, misses,
+                        len(vehicle.applied))
+        elif not vehicle.commands_effective and misses == 0 and len(vehicle.applied) == APPLIED_WINDOW:
+            vehicle.commands_effective = True
+            log.info("vehicle sysid %d: its commands take effect again", vehicle.sysid)
+        return applied
 
     def _retire(self, sysid: int) -> Vehicle:
         v = self.vehicles.pop(sysid)
