@@ -22,9 +22,10 @@ class DesignFailed(UserError):
 def run_cli_command(prog: str, args) -> int:
     """Run ``args.func(args)`` the way every command of this project reports errors.
 
-    A ``UserError`` is one line on stderr (``prog command: error: ...``) and its exit code, Ctrl-C is 130;
-    anything else is a bug and keeps its traceback.
+    A ``UserError`` is one line on stderr (``prog command: error: ...``) and its exit code, Ctrl-C is 130,
+    a closed stdout pipe (``... | head``) is a quiet exit 2; anything else is a bug and keeps its traceback.
     """
+    import os
     import sys
 
     try:
@@ -34,3 +35,8 @@ def run_cli_command(prog: str, args) -> int:
         return exc.exit_code
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        # the reader went away: say nothing, and keep Python from complaining while it flushes at exit
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 2

@@ -48,3 +48,58 @@ def test_mavlink_port_in_use_is_one_line_exit_2(tmp_path) -> None:
     assert out.returncode == 2, out.stderr
     lines = [line for line in out.stderr.splitlines() if "error" in line]
     assert len(lines) == 1 and "in use" in lines[0] and "Traceback" not in out.stderr, out.stderr
+
+
+@pytest.mark.parametrize("endpoint, message", [
+    ("tcp/256.1.1.1:7447", "not a valid IP address"),
+    ("tcp/127.0.0.1", "PROTOCOL/HOST:PORT with a port"),
+    ("foo", "expected PROTOCOL/HOST:PORT"),
+    ("tcp/no-such-host.invalid:7447", "cannot resolve host"),
+])
+def test_bad_zenoh_endpoints_are_one_line_errors(endpoint: str, message: str) -> None:
+    from monitor.wire.zenoh_session import build_config
+
+    with pytest.raises(UserError, match=message):
+        build_config(connect=[endpoint])
+
+
+def test_zenoh_errors_lose_their_rust_source_paths() -> None:
+    from monitor.wire.zenoh_session import build_config, open_session
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        with pytest.raises(UserError) as err:
+            open_session(build_config(listen=[f"tcp/127.0.0.1:{port}"]))
+    assert "Address already in use" in str(err.value) and ".rs:" not in str(err.value)
+
+
+def test_operator_mistakes_on_run_are_one_line_exit_2(tmp_path) -> None:
+    from tests.test_service_vehicles import _gains_file
+
+    gains = _gains_file(tmp_path / "gains.toml")
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text("vehicle = 3\n")
+    cases = [(["--queue", "0"], "--queue must be at least 1"),
+             (["--zenoh-connect", "tcp/256.1.1.1:7447"], "not a valid IP address"),
+             (["--fleet", str(fleet)], "'vehicle' must be tables"),
+             (["--mavlink", "udpin:no-such-host.invalid:14550"], "cannot resolve host")]
+    for extra, message in cases:
+        out = subprocess.run([sys.executable, "-m", "monitor", "run", "--plant", "paper-continuous", "--gains",
+                              str(gains), "--mavlink", "udpin:127.0.0.1:0", *extra], capture_output=True, text=True,
+                             timeout=60)
+        assert out.returncode == 2 and message in out.stderr, (extra, out.stderr)
+        assert "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1, out.stderr
+
+
+def test_a_closed_stdout_pipe_is_a_quiet_exit(tmp_path) -> None:
+    """``fault-monitor subscribe | head``: every command runs through run_cli_command, which must stay quiet."""
+    script = ("import sys, types; from monitor.errors import run_cli_command\n"
+              "args = types.SimpleNamespace(command='subscribe', func=lambda a: [print('x' * 100) for _ in range(10**5)])\n"
+              "sys.exit(run_cli_command('fault-monitor', args))\n")
+    (tmp_path / "talk.py").write_text(script)
+    proc = subprocess.run(f"{sys.executable} {tmp_path / 'talk.py'} | head -c 10 > /dev/null; echo ${{PIPESTATUS[0]}}",
+                          shell=True, executable="/bin/bash", capture_output=True, timeout=60)
+    assert proc.stderr == b"", proc.stderr
+    assert proc.stdout.strip() == b"2"

@@ -236,11 +236,19 @@ class UdpLink(Link):
 
 
 class _Connection(asyncio.Protocol):
-    """One TCP connection: its own stream parser (partial frames survive across reads)."""
+    """One TCP connection: its own stream parser (partial frames survive across reads).
+
+    A stream's backlog after a stall is processed in order, but at most ``per_pass`` frames per pass of
+    the event loop: the rest waits in ``_backlog`` for the next pass, so one connection's burst cannot keep
+    the other links and the timers waiting.
+    """
+
+    per_pass = 256
 
     def __init__(self, link: "TcpLink") -> None:
         self.link = link
         self.parser = link.new_parser(stream=True)
+        self._backlog: list[RawFrame] = []
         self.transport: asyncio.Transport | None = None
         self.closed = asyncio.get_running_loop().create_future()
         self.peer = "?"
@@ -254,8 +262,24 @@ class _Connection(asyncio.Protocol):
     def data_received(self, data: bytes) -> None:
         t0 = time.perf_counter_ns()
         frames = self.parser.feed(data)
-        if frames:
-            _guarded(self.link.handler, (self.link, self), frames, t0)
+        if not frames:
+            return
+        if self._backlog:  # keep the order: new frames queue behind the ones still waiting
+            self._backlog.extend(frames)
+            return
+        self._process(frames, t0)
+
+    def _process(self, frames: list[RawFrame], t0: int) -> None:
+        now_frames, rest = frames[: self.per_pass], frames[self.per_pass :]
+        _guarded(self.link.handler, (self.link, self), now_frames, t0)
+        if rest:
+            self._backlog = rest
+            asyncio.get_running_loop().call_soon(self._drain)
+
+    def _drain(self) -> None:
+        frames, self._backlog = self._backlog, []
+        if frames and self.transport is not None and not self.transport.is_closing():
+            self._process(frames, time.perf_counter_ns())
 
     def connection_lost(self, exc) -> None:
         self.link.connections.discard(self)

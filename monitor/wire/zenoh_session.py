@@ -9,8 +9,11 @@ callback subscriber left declared keeps a non-daemon thread alive, so a process 
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import logging
+import re
+import socket
 import threading
 from pathlib import Path
 from typing import Iterable
@@ -47,7 +50,7 @@ def build_config(
         try:
             conf = zenoh.Config.from_file(str(Path(config_file)))
         except Exception as exc:  # zenoh raises its own ZError with a long message
-            raise UserError(f"{config_file}: not a valid Zenoh config: {str(exc).splitlines()[0]}") from None
+            raise UserError(f"{config_file}: not a valid Zenoh config: {zenoh_message(exc)}") from None
     else:
         conf = zenoh.Config()
         conf.insert_json5("mode", json.dumps(mode))
@@ -55,14 +58,53 @@ def build_config(
         conf.insert_json5("scouting/gossip/enabled", "false")
         if not listen and mode != "client":
             listen = ["tcp/127.0.0.1:0"]
+    for endpoint in listen + connect:
+        check_endpoint(endpoint)
     try:
         if listen:
             conf.insert_json5("listen/endpoints", json.dumps(listen))
         if connect:
             conf.insert_json5("connect/endpoints", json.dumps(connect))
     except Exception as exc:
-        raise UserError(f"bad Zenoh endpoint in {listen + connect}: {str(exc).splitlines()[0]}") from None
+        raise UserError(f"bad Zenoh endpoint in {listen + connect}: {zenoh_message(exc)}") from None
     return conf
+
+
+_RUST_SOURCE = re.compile(r"\s+at /\S+\.rs:\d+\.?")
+
+
+def zenoh_message(exc: BaseException) -> str:
+    """Zenoh's error text on one line, without the Rust source paths it appends (they help nobody here)."""
+    text = _RUST_SOURCE.sub("", str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+    match = re.search(r'msg: "(.*?)"', text)  # JSON5 config errors wrap the useful part
+    return match.group(1) if match else text
+
+
+def check_endpoint(endpoint: str) -> None:
+    """``tcp/HOST:PORT`` (or udp, tls, quic, ws): a one-line UserError for what Zenoh would retry forever.
+
+    Zenoh accepts ``tcp/256.1.1.1:7447`` and then silently fails to connect; a typo in an address
+    should stop the daemon at start, not leave it running alone.
+    """
+    proto, sep, rest = endpoint.partition("/")
+    address = rest.split("?", 1)[0].split("#", 1)[0]
+    host, _, port = address.rpartition(":")
+    if not sep or proto not in ("tcp", "udp", "tls", "quic", "ws"):
+        if sep and proto.startswith("unixsock"):
+            return
+        raise UserError(f"Zenoh endpoint '{endpoint}': expected PROTOCOL/HOST:PORT, e.g. tcp/127.0.0.1:7447")
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    if not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise UserError(f"Zenoh endpoint '{endpoint}': expected PROTOCOL/HOST:PORT with a port 0-65535")
+    try:
+        ipaddress.ip_address(host)
+    except ValueError:
+        if re.fullmatch(r"[0-9.]+", host):
+            raise UserError(f"Zenoh endpoint '{endpoint}': '{host}' is not a valid IP address") from None
+        try:
+            socket.getaddrinfo(host, int(port))
+        except (socket.gaierror, UnicodeError):
+            raise UserError(f"Zenoh endpoint '{endpoint}': cannot resolve host '{host}'") from None
 
 
 def open_session(conf: zenoh.Config) -> zenoh.Session:
@@ -70,7 +112,7 @@ def open_session(conf: zenoh.Config) -> zenoh.Session:
     try:
         return zenoh.open(conf)
     except Exception as exc:
-        raise UserError(f"cannot open Zenoh session: {str(exc).splitlines()[0]}") from None
+        raise UserError(f"cannot open Zenoh session: {zenoh_message(exc)}") from None
 
 
 def close_quietly(session: zenoh.Session | None, *entities, timeout: float = 5.0) -> None:
