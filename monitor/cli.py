@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import logging
 import sys
 
 from monitor import __version__
-from monitor.errors import run_cli_command
+from monitor.cli_logging import add_log_level_everywhere, configure_logging
+from monitor.config_file import parse_args_with_config
+from monitor.errors import UserError, run_cli_command
 
 COMMANDS = ("design", "verify", "margin", "threshold", "run", "analyse", "subscribe", "replay", "router", "demo")
 
@@ -29,8 +30,6 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Start with: fault-monitor demo --out demo-out   (see README.md)",
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    parser.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"),
-                        help="log verbosity on stderr (default: INFO)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         try:
@@ -40,14 +39,18 @@ def build_parser() -> argparse.ArgumentParser:
                 continue
             raise
         module.register(sub)
+    add_log_level_everywhere(parser)  # before or after the sub-command, on every one of them
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=getattr(logging, args.log_level), format="%(asctime)s %(name)s %(levelname)s %(message)s",
-                        stream=sys.stderr)
+    try:
+        args = parse_args_with_config(parser, argv)  # a command with --config FILE is preset from FILE
+    except UserError as exc:
+        print(f"fault-monitor: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    configure_logging(args)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

@@ -13,6 +13,8 @@ import json
 import logging
 import sys
 
+from monitor.cli_logging import add_log_level_everywhere, configure_logging
+from monitor.config_file import parse_args_with_config
 from monitor.errors import UserError, run_cli_command
 from monitor.wire.zenoh_session import add_zenoh_arguments, close_quietly, config_from_args, key, open_session
 
@@ -101,10 +103,9 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--no-zenoh", action="store_true", help="do not publish the truth on Zenoh")
     o.add_argument("--truth-jsonl", default=None, metavar="FILE", help="also write every truth payload to FILE")
     o.add_argument("--summary-json", default=None, metavar="FILE", help="also write the exit summary as JSON")
-    o.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"),
-                   help="log verbosity on stderr (default: INFO)")
     add_zenoh_arguments(run)
     run.set_defaults(func=cmd_run)
+    add_log_level_everywhere(parser)  # sim-vehicle --log-level L run, or sim-vehicle run --log-level L
     return parser
 
 
@@ -153,19 +154,13 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
-    if getattr(args, "config", None):
-        try:
-            from sim_vehicle.config import apply_config_file
-
-            apply_config_file(parser._subparsers._group_actions[0].choices["run"], args.config)  # type: ignore[union-attr]
-        except UserError as exc:
-            print(f"sim-vehicle: error: {exc}", file=sys.stderr)
-            return exc.exit_code
-        args = parser.parse_args(argv)
+    try:
+        args = parse_args_with_config(parser, argv)  # run --config FILE: the file presets the flags
+    except UserError as exc:
+        print(f"sim-vehicle: error: {exc}", file=sys.stderr)
+        return exc.exit_code
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    logging.basicConfig(level=getattr(logging, str(args.log_level).upper(), logging.INFO),
-                        format="%(asctime)s %(name)s %(levelname)s %(message)s", stream=sys.stderr)
+    configure_logging(args)
     return run_cli_command("sim-vehicle", args)

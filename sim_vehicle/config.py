@@ -10,18 +10,18 @@ A vehicle file holds the same names as the long flags (``-`` or ``_``), e.g.::
     zenoh_connect = ["tcp/127.0.0.1:7447"]
 
 Flags given on the command line win over the file. Why strict: an unknown key (``dealy``) silently
-ignored would run a different experiment than the one written down, so it is an error.
+ignored would run a different experiment than the one written down, so it is an error. The file is
+read by ``monitor.config_file``, the same reader as ``fault-monitor run --config``.
 """
 
 from __future__ import annotations
 
 import argparse
-import tomllib
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
+from monitor.config_file import apply_config_file  # the one reader of --config files (also fault-monitor run)
 from monitor.errors import UserError
 from monitor.plant import Plant, load_plant
 from monitor.wire.specs import DelaySampler, FaultSchedule, parse_delay_spec, parse_fault_spec
@@ -50,24 +50,6 @@ class Settings:
     target: tuple[str, int]
     bind: tuple[str, int]
     autopilot: np.ndarray | None = None
-
-
-def apply_config_file(parser: argparse.ArgumentParser, path: str) -> None:
-    """Make the keys of a TOML vehicle file the parser's defaults (flags still override them)."""
-    try:
-        raw = tomllib.loads(Path(path).read_text("utf-8"))
-    except OSError as exc:
-        raise UserError(f"--config {path}: cannot read: {exc.strerror}") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise UserError(f"--config {path}: not valid TOML: {exc}") from None
-    known = {a.dest for a in parser._actions} - {"help", "config", "func"}
-    values = {}
-    for name, value in raw.items():
-        dest = name.replace("-", "_")
-        if dest not in known:
-            raise UserError(f"--config {path}: unknown key '{name}' (allowed: {', '.join(sorted(known))})")
-        values[dest] = value
-    parser.set_defaults(**values)
 
 
 def parse_hostport(text: str, what: str) -> tuple[str, int]:
