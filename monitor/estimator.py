@@ -109,8 +109,14 @@ class Estimator:
         lim = self.u_limit
         return np.clip(u, -lim, lim) if lim is not None else u
 
-    def _advance(self, s: EstimatorState, k: int, u_prev) -> int:
-        """Predict over lost samples up to k, then put the reported u(k-1) in the state."""
+    def _advance(self, s: EstimatorState, k: int, u_prev, applied: bool | None = None) -> int:
+        """Predict over lost samples up to k, then put the reported u(k-1) in the state.
+
+        ``applied is False`` (the vehicle reports that the command for k-1 never acted): the last step
+        assumed ``B0 u(k-1)`` over the interval's tail while the actuator held the reported deflection the
+        whole interval, so ``x_hat(k)`` is corrected by ``B0 (held - u(k-1))``: the estimator steps with
+        the held deflection, as the contract says, instead of learning a phantom fault.
+        """
         if s.k_last is not None and k <= s.k_last:
             raise ValueError(f"sample {k} is not newer than {s.k_last}")
         skipped = 0
@@ -122,6 +128,9 @@ class Estimator:
                 s.z = np.linalg.matrix_power(self._predict_T, gap) @ s.z
                 skipped = gap
         if u_prev is not None:
+            if applied is False and not skipped:
+                n, nq = s.n, self._nq
+                s.z[:n] += self.plant.B0 @ (np.asarray(u_prev, dtype=float) - s.z[nq:])
             s.z[self._nq :] = u_prev
         return skipped
 
@@ -138,12 +147,13 @@ class Estimator:
         return StepResult(k=k, u=np.array(u), x_hat=z[: s.n], f_hat=z[s.n : nq], residual=np.array(out[nq:]),
                           skipped=skipped, reset=reset)
 
-    def step(self, s: EstimatorState, k: int, y, u_prev=None) -> StepResult:
+    def step(self, s: EstimatorState, k: int, y, u_prev=None, applied: bool | None = None) -> StepResult:
         """Process sample k in place and return the command. Raises ValueError for a stale or duplicate k.
 
-        ``u_prev``: the deflection the vehicle reports at k (None: the estimator's own last command).
+        ``u_prev``: the deflection the vehicle reports at k (None: the estimator's own last command);
+        ``applied``: whether that report shows the command for k-1 acted (False: see ``_advance``).
         """
-        skipped = self._advance(s, k, u_prev)
+        skipped = self._advance(s, k, u_prev, applied)
         v = s.z.tolist() + [float(e) for e in np.ravel(y)]
         u = [sum(map(mul, row, v)) for row in self._U_rows]
         lim = self._lim

@@ -63,3 +63,23 @@ def test_a_non_finite_state_is_reset_and_flagged() -> None:
     res = est.step(s, 0, [float("nan")])
     assert res.reset and np.all(s.z == 0.0)
     assert not est.step(s, 1, [0.1]).reset
+
+
+def test_a_command_that_never_acted_is_replaced_by_the_held_deflection_in_the_last_step() -> None:
+    """Every command late: the plant only ever sees the held 0; the estimate must match that plant exactly."""
+    p = load_plant("paper-continuous")
+    cdf = float((p.C @ p.Df)[0, 0])  # a stable observer: the fault-direction deadbeat one
+    est = Estimator(p, Gains(L=(p.A + np.eye(2)) @ p.Df / cdf, M=np.array([[1 / cdf]]), K1=G.K1, K2=G.K2, K3=G.K3))
+    s = est.initial_state()
+    x, f = np.zeros(2), 2.0  # a 2-degree bias from the start, the elevator stuck at its held 0
+    for k in range(40):
+        y = (p.C @ x)[0]
+        est.step(s, k, [y], u_prev=[0.0], applied=None if k == 0 else False)
+        x = p.A @ x + (p.Df * f).ravel()
+    assert abs(s.f_hat[0] - 2.0) < 1e-6
+    s2 = est.initial_state()
+    x = np.zeros(2)
+    for k in range(40):  # without being told, the same data leaves a biased estimate
+        est.step(s2, k, [(p.C @ x)[0]], u_prev=[0.0])
+        x = p.A @ x + (p.Df * f).ravel()
+    assert abs(s2.f_hat[0] - 2.0) > 0.1

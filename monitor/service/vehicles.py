@@ -321,7 +321,7 @@ class VehicleTable:
                 self.counters.no_report += 1
             else:
                 applied = self._judge_applied(vehicle, sample.k, u_report)
-            result = est.step(vehicle.state, sample.k, y, u_prev=u_report)
+            result = est.step(vehicle.state, sample.k, y, u_prev=u_report, applied=applied)
             vehicle.last_command = result.u.tolist()
             vehicle.last_command_k = sample.k
         if result.reset:
