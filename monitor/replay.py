@@ -172,15 +172,23 @@ _OPTIONAL = {"elevator", "tau_obs", "tau"}  # None when not recorded; other miss
 
 
 def _assemble(cls: type, sysid: int, columns: list[_Column]) -> list[Any]:
-    """Align every column of one vehicle on the union of its k and build one ``cls`` record per k."""
-    ks = np.unique(np.concatenate([c.k for c in columns]))
-    n = ks.size
+    """Align every column of one vehicle and build one ``cls`` record per row.
+
+    The monitor's rows are aligned on their receive time (``wall_time``), unique per processed sample, so
+    a vehicle that restarted (k starting again) keeps both runs; rows without one (the truth) align on k.
+    """
+    by_wall = all(c.wall is not None for c in columns)
+    keys = np.unique(np.concatenate([c.wall if by_wall else c.k for c in columns]))
+    n = keys.size
+    ks = np.zeros(n, np.int64)
+    for c in columns:
+        ks[np.searchsorted(keys, c.wall if by_wall else c.k)] = c.k
     per_row: dict[str, list[Any]] = {"sysid": [sysid] * n, "k": ks.tolist()}
     t, wall = np.full(n, math.nan), np.full(n, math.nan)
     scalars: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     vectors: dict[str, dict[int, np.ndarray]] = {}
     for c in columns:
-        pos = np.searchsorted(ks, c.k)
+        pos = np.searchsorted(keys, c.wall if by_wall else c.k)
         t[pos] = c.t
         if c.wall is not None:
             wall[pos] = c.wall
@@ -193,6 +201,8 @@ def _assemble(cls: type, sysid: int, columns: list[_Column]) -> list[Any]:
     for name, (values, has) in scalars.items():
         if name == "alarm":
             per_row[name] = (has & (values >= 0.5)).tolist()
+        elif name == "run":
+            per_row[name] = [int(v) if h else 0 for v, h in zip(values.tolist(), has.tolist())]
         elif name in _OPTIONAL:
             per_row[name] = [v if h else None for v, h in zip(values.tolist(), has.tolist())]
         else:
@@ -216,6 +226,8 @@ def _absent(name: str, n: int) -> list[Any]:
         return [None] * n
     if name in SAMPLE_VECTORS or name in TRUTH_VECTORS:
         return [[] for _ in range(n)]
+    if name == "run":
+        return [0] * n
     return [False] * n if name == "alarm" else [math.nan] * n
 
 
@@ -310,8 +322,14 @@ def _times(value: int | None, h: float | None) -> float | None:
 
 def analyse_vehicle(series: VehicleSeries, fault_spec: str | None = None,
                     tol: float = SETTLING_TOL) -> dict[str, Any]:
-    """Every score of one vehicle, as a JSON-able dict (see ``fault-monitor replay --help`` for the keys)."""
-    s = series.samples
+    """Every score of one vehicle, as a JSON-able dict (see ``fault-monitor replay --help`` for the keys).
+
+    A vehicle that restarted has several runs (k starts again): ``samples`` counts every processed sample
+    of every run, ``runs`` how many there were, and the scores are those of the last run.
+    """
+    runs = sorted({r.run for r in series.samples})
+    total = len(series.samples)
+    s = [r for r in series.samples if r.run == runs[-1]] if len(runs) > 1 else series.samples
     k = np.array([r.k for r in s], dtype=np.int64)
     t = np.array([r.t for r in s], dtype=float)
     f_hat = np.array([r.f_hat[0] if r.f_hat else math.nan for r in s], dtype=float)
@@ -340,7 +358,9 @@ def analyse_vehicle(series: VehicleSeries, fault_spec: str | None = None,
     processing = [r.processing_s * 1e3 for r in s]
     return {
         "sysid": series.sysid,
-        "samples": int(k.size),
+        "samples": total,
+        "runs": max(1, len(runs)),
+        "last_run_samples": int(k.size),
         "k_first": int(k[0]) if k.size else None,
         "k_last": int(k[-1]) if k.size else None,
         "missing": int(k[-1] - k[0] + 1 - k.size) if k.size else 0,

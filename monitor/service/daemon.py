@@ -76,6 +76,13 @@ def _on_truth(recorder, payload: bytes) -> None:
         log.debug("ignoring a truth sample: %s", exc)
 
 
+def _check_recorder(pipeline: Pipeline) -> None:
+    """A recording that stopped being written is an ERROR now (logged by the recorder) and in the status."""
+    recorder, publisher = pipeline.recorder, pipeline.publisher
+    if recorder is not None and getattr(recorder, "error", None) and publisher is not None:
+        publisher.status_extra["recording_error"] = recorder.error
+
+
 async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
@@ -105,6 +112,7 @@ async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
                     link.heartbeat()
                 pipeline.table.expire(now)
                 pipeline.table.warn_missing(now)
+                _check_recorder(pipeline)
     finally:
         for link in links:
             link.close()
@@ -114,7 +122,7 @@ async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
 
 
 def run_daemon(config: MonitorConfig, zenoh_config) -> int:
-    """Run until SIGINT/SIGTERM; returns the exit code (0)."""
+    """Run until SIGINT/SIGTERM; returns the exit code: 0, or 1 when the recording could not be written."""
     from monitor.service.publisher import EstimatePublisher
     from monitor.wire.zenoh_session import close_quietly, open_session
 
@@ -141,5 +149,8 @@ def run_daemon(config: MonitorConfig, zenoh_config) -> int:
         if recorder is not None:
             recorder.close()
         close_quietly(session, *entities)
+    if recorder is not None and recorder.error:
+        log.error("the recording %s is incomplete: %s", config.rrd, recorder.error)
+        return 1
     return 0
 

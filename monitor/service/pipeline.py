@@ -155,7 +155,7 @@ class Pipeline:
         return SampleRecord(sysid=p.vehicle.sysid, k=r.k, t=p.t, wall=wall, y=p.y, alpha=values.get("alpha"),
                             q=values.get("q"), elevator=elevator, x_hat=r.x_hat.tolist(), f_hat=r.f_hat.tolist(),
                             u=r.u.tolist(), residual=r.residual.tolist(), tau_obs=p.tau_obs, processing_s=processing,
-                            alarm=p.vehicle.alarm.raised)
+                            alarm=p.vehicle.alarm.raised, run=p.vehicle.run)
 
     # --- housekeeping and reporting -----------------------------------------------------------------
     def counts(self) -> dict[str, int]:

@@ -69,6 +69,7 @@ class EstimatePublisher:
         self.dropped = 0
         self.published = 0
         self.latest: dict[int, EstimateItem] = {}
+        self.status_extra: dict[str, Any] = {}  # the daemon's health (e.g. a recording error), added to status replies
         self.poll_s = poll_s
         self._queue: collections.deque = collections.deque()
         self._stop = threading.Event()
@@ -131,7 +132,8 @@ class EstimatePublisher:
             for sysid, item in list(self.latest.items()):
                 key = f"{self.prefix}/{sysid}/fault/status"
                 if wanted.intersects(zenoh.KeyExpr(key)):
-                    query.reply(key, json.dumps(estimate_payload(item, self.unit), allow_nan=False), encoding=_JSON)
+                    payload = {**estimate_payload(item, self.unit), **self.status_extra}
+                    query.reply(key, json.dumps(payload, allow_nan=False), encoding=_JSON)
         except Exception as exc:
             log.debug("status query failed: %s", exc)
 

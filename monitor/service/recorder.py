@@ -33,6 +33,7 @@ Entity paths (units: deg, deg/s, s; vectors are split into one scalar entity per
     /vehicle/<sysid>/timing/tau_obs        delay observed by the monitor, s (rows only when observed)
     /vehicle/<sysid>/timing/processing_ms  monitor processing time of the sample, ms
     /vehicle/<sysid>/alarm                 1.0 while the fault alarm is raised, else 0.0
+    /vehicle/<sysid>/run                   0 for the vehicle's first estimator, then 1, 2, ... after restarts
     /vehicle/<sysid>/truth/x/<i>           simulator ground truth (uav/<sysid>/truth), when subscribed
     /vehicle/<sysid>/truth/f/<i>
     /vehicle/<sysid>/truth/d/<i>
@@ -96,6 +97,7 @@ SAMPLE_SCALARS: dict[str, tuple[str, float]] = {
     "tau_obs": ("timing/tau_obs", 1.0),
     "processing_s": ("timing/processing_ms", 1e3),
     "alarm": ("alarm", 1.0),
+    "run": ("run", 1.0),
 }
 SAMPLE_VECTORS: dict[str, str] = {
     "y": "measured/y",
@@ -281,6 +283,7 @@ class RrdRecorder:
         self._blueprint_ids: frozenset[int] = frozenset()
         self._blueprint_at = -math.inf  # monotonic time of the last blueprint sent
         self._failures: set[str] = set()
+        self.error: str | None = None  # the first write failure, as one line (the daemon reports it)
         self._stop = threading.Event()
         self._closed = False
         self._close_lock = threading.Lock()
@@ -344,6 +347,11 @@ class RrdRecorder:
         self._write(samples, SAMPLE_SCALARS, SAMPLE_VECTORS, wall=True)
         self._write(truths, TRUTH_SCALARS, TRUTH_VECTORS, wall=False)
         self._update_blueprint(force=False)
+        # Rerun writes the file from its own thread and reports a failure (disk full) only on flush: flush
+        # here, in the writer thread, so that a failure is known within one batch, not at close
+        if self.error is None and not self._guard(f"writing {self.path} (disk full or file removed?)",
+                                                  lambda: self._rec.flush(timeout_sec=5.0)):
+            self.stats["failed"] += len(batch)
 
     def _write(self, records: list, scalars: dict[str, tuple[str, float]], vectors: dict[str, str],
                wall: bool) -> None:
@@ -381,6 +389,8 @@ class RrdRecorder:
             return False
 
     def _fail_once(self, kind: str, message: str) -> None:
+        if self.error is None:
+            self.error = f"{kind}: {message}"
         if kind not in self._failures:
             self._failures.add(kind)
             log.error("rrd recorder %s failed (%s); the loop goes on, see recorder stats", kind, message)

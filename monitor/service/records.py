@@ -37,6 +37,7 @@ class SampleRecord:
     tau_obs: float | None
     processing_s: float
     alarm: bool
+    run: int = 0  # 0 for a vehicle's first estimator, 1, 2, ... after each restart (runs are kept apart)
 
 
 @dataclass

@@ -145,11 +145,12 @@ class Vehicle:
 
     __slots__ = ("sysid", "model", "state", "alarm", "delay", "assembler", "route", "last_seen", "first_seen",
                  "processed", "skipped", "warned_missing", "last_command", "last_command_k", "no_report", "rejected",
-                 "last_reject_log", "applied", "commands_effective", "not_applied", "last_sample_at")
+                 "last_reject_log", "applied", "commands_effective", "not_applied", "last_sample_at", "run")
 
     def __init__(self, sysid: int, model: VehicleModel, alarm: AlarmConfig, route: object, now: float,
-                 observe: bool, wait_s: float) -> None:
+                 observe: bool, wait_s: float, run: int = 0) -> None:
         self.sysid = sysid
+        self.run = run  # how many estimators this sysid had before this one (restarts, expiries)
         self.model = model
         self.state: EstimatorState = model.estimator.initial_state()
         self.alarm = Alarm(alarm)
@@ -219,7 +220,8 @@ class VehicleTable:
         self.counters = TableCounters()
         self._refused_logged: set[int] = set()
         self._instants = {m.signals.instant for m in fleet.models()}
-        self._retired: list[Vehicle] = []  # assembly counts of restarted and expired vehicles, for the summary
+        self._retired: list[Vehicle] = []
+        self._runs: dict[int, int] = {}  # assembly counts of restarted and expired vehicles, for the summary
 
     def _create(self, sysid: int, name: str, route: object, now: float) -> Vehicle | None:
         model = self.fleet.model_for(sysid)
@@ -231,7 +233,9 @@ class VehicleTable:
                 log.warning("refusing vehicle sysid %d from %s: no plant/gains for it (fleet file or --plant/--gains)",
                             sysid, _where(route))
             return None
-        vehicle = self.vehicles[sysid] = Vehicle(sysid, model, self.alarm, route, now, self.observe, self.wait_s)
+        run = self._runs.get(sysid, -1) + 1
+        self._runs[sysid] = run
+        vehicle = self.vehicles[sysid] = Vehicle(sysid, model, self.alarm, route, now, self.observe, self.wait_s, run)
         self.counters.vehicles_seen += 1
         log.info("vehicle sysid %d from %s: new estimator (plant %s; %s)", sysid, _where(route), model.plant.name,
                  model.signals.describe())
