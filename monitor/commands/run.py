@@ -70,7 +70,9 @@ def register(subparsers) -> None:
             "<prefix>/<sysid>/fault/status, liveliness <prefix>/monitor/<name>) and optionally record every "
             "sample to a Rerun .rrd. Stops on SIGINT/SIGTERM with exit code 0 after flushing the recording."),
         epilog="Example: fault-monitor run --plant paper-continuous --gains gains.toml "
-               "--mavlink udpin:127.0.0.1:14550 --rrd run.rrd")
+               "--mavlink udpin:127.0.0.1:14550 --rrd run.rrd   (or: fault-monitor run --config monitor.toml)")
+    p.add_argument("--config", metavar="FILE.toml", help="a TOML file whose keys are these long flag names "
+                   "(- or _; lists for repeatable flags, true/false for switches); flags given here override it")
     add_model_arguments(p)
     link = p.add_argument_group("MAVLink")
     link.add_argument("--mavlink", action="append", default=None, metavar="CONN",
