@@ -281,6 +281,9 @@ class _Connection(asyncio.Protocol):
         if frames and self.transport is not None and not self.transport.is_closing():
             self._process(frames, time.perf_counter_ns())
 
+    def is_closed(self) -> bool:
+        return self.closed.done()
+
     def connection_lost(self, exc) -> None:
         self.link.connections.discard(self)
         log.info("%s: connection from %s closed%s", self.link.spec, self.peer, f" ({exc})" if exc else "")

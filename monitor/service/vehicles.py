@@ -246,7 +246,8 @@ class VehicleTable:
 
         Who may speak for a vehicle: the link and peer it is bound to. While that source is live
         (heard within ``restart_silence``), the same sysid from anywhere else is refused and counted; after
-        that silence a new source takes over (a restart when its k goes backwards: fresh estimator).
+        that silence, or at once when the bound TCP connection closed, a new source takes over (a restart when
+        its k goes backwards: fresh estimator).
         """
         vehicle = self.vehicles.get(sysid)
         if vehicle is None:
@@ -255,7 +256,7 @@ class VehicleTable:
                 return []
         asm = vehicle.assembler
         if route != vehicle.route:
-            if now - vehicle.last_seen < self.restart_silence:
+            if now - vehicle.last_seen < self.restart_silence and _alive(vehicle.route):
                 self.counters.foreign_source += 1
                 return []
             k = asm.index_of(name, values)
@@ -403,6 +404,13 @@ class VehicleTable:
             v.warned_missing = True
             warned.append(v.sysid)
         return warned
+
+
+def _alive(route: object) -> bool:
+    """Whether a bound source can still speak: a closed TCP connection cannot (its vehicle reconnects at once)."""
+    peer = route[1] if isinstance(route, tuple) and len(route) == 2 else None
+    closed = getattr(peer, "is_closed", None)
+    return not closed() if callable(closed) else True
 
 
 def _where(route: object) -> str:

@@ -143,3 +143,25 @@ def test_a_second_airframe_whose_C_reads_alpha_and_q(tmp_path: Path) -> None:
     assert processed_count(log) == 40, log[-2000:]
     assert "y0=AOA_SSA.AOA, y1=ATTITUDE.pitchspeed" in log
     assert check_against_equations(plant, read_gains(gains_path), peer.wire, list(range(40))) == 40
+
+
+def test_two_links_at_once_and_a_tcp_reconnect(tmp_path: Path, gains_file: Path) -> None:
+    """udpin and tcp in one monitor: each vehicle is answered on its own link; the TCP link reconnects."""
+    plant = load_plant("paper-continuous")
+    udp_peer, tcp_peer = PeerVehicle(plant, sysid=4, seed=5), PeerVehicle(plant, sysid=9, seed=6)
+    udp_port = free_udp_port()
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen(1)
+        tcp_port = server.getsockname()[1]
+        with _monitor(tmp_path, "paper-continuous", gains_file, f"udpin:127.0.0.1:{udp_port}", "two",
+                      "--mavlink", f"tcp:127.0.0.1:{tcp_port}") as monitor:
+            wait_ready(monitor)
+            fly_udp(udp_peer, udp_port, 25)
+            fly_tcp_server(tcp_peer, server, 10)  # the server then drops the connection ...
+            fly_tcp_server(tcp_peer, server, 10)  # ... and the monitor comes back (back-off from 0.5 s)
+            log = _stop(monitor)
+    assert processed_count(log) == 45, log[-2000:]
+    assert sorted(udp_peer.wire.commands) == list(range(25))
+    assert sorted(tcp_peer.wire.commands) == list(range(20))
+    assert check_against_equations(plant, read_gains(gains_file), udp_peer.wire, list(range(25))) == 25

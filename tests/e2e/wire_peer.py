@@ -41,6 +41,7 @@ class PeerVehicle:
 
     def __init__(self, plant, sysid: int, seed: int, outputs: str = "alpha", fault_at: int = 20,
                  bias: float = 2.0) -> None:
+        self.k_next = 0  # flights continue where the last one stopped (a reconnect)
         self.plant, self.sysid, self.rng = plant, sysid, random.Random(seed)
         self.codec = new_codec(sysid, 1)
         self.rx = new_codec(sysid, 1)
@@ -126,11 +127,12 @@ def fly_udp(peer: PeerVehicle, port: int, steps: int, wait_s: float = 1.0, linge
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.bind(("127.0.0.1", 0))
         sock.settimeout(0.05)
-        for k in range(steps):
+        for k in range(peer.k_next, peer.k_next + steps):
             for frame in peer.frames(k):
                 sock.sendto(frame, ("127.0.0.1", port))
             _await(lambda: sock.recv(65535), peer, k, wait_s)
             peer.advance(k)
+        peer.k_next += steps
         deadline = time.monotonic() + linger_s
         while time.monotonic() < deadline and "HEARTBEAT" not in peer.wire.other:
             try:
@@ -157,7 +159,7 @@ def fly_tcp_stream(peer: PeerVehicle, conn: socket.socket, steps: int, wait_s: f
     with conn:
         conn.settimeout(0.05)
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        for k in range(steps):
+        for k in range(peer.k_next, peer.k_next + steps):
             data = b"".join(peer.frames(k))
             cuts = sorted(peer.rng.sample(range(1, len(data)), 6))
             for a, b in zip([0, *cuts], [*cuts, len(data)]):
@@ -165,6 +167,7 @@ def fly_tcp_stream(peer: PeerVehicle, conn: socket.socket, steps: int, wait_s: f
                 time.sleep(0.001)  # separate reads on the other side, splitting frames for real
             _await(lambda: conn.recv(65535), peer, k, wait_s)
             peer.advance(k)
+        peer.k_next += steps
 
 
 def _await(recv, peer: PeerVehicle, k: int, wait_s: float) -> None:
