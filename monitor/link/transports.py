@@ -197,6 +197,9 @@ class UdpLink(Link):
             self.on_datagram(data, addr, time.perf_counter_ns())
 
     def on_datagram(self, data: bytes, addr, t0: int) -> None:
+        frames = self.parser.feed(data)
+        if not frames:  # junk costs no bookkeeping, and its source gets no heartbeat (no reflection)
+            return
         peers = self._peers
         if addr in peers:
             peers.move_to_end(addr)
@@ -204,9 +207,7 @@ class UdpLink(Link):
             peers.popitem(last=False)
             self.peers_evicted += 1
         peers[addr] = time.monotonic()
-        frames = self.parser.feed(data)
-        if frames:
-            _guarded(self.handler, (self, addr), frames, t0)
+        _guarded(self.handler, (self, addr), frames, t0)
 
     def peers(self) -> list[object]:
         if self.spec.kind == "udpout":
