@@ -71,6 +71,10 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if recorder is not None:
             recorder.close()
+    if result.extra.get("commands_in_log"):
+        print(f"analyse: note: the log holds {result.extra['commands_in_log']} SET_ACTUATOR_CONTROL_TARGET commands "
+              "(a monitor-controlled flight); analyse reads the actuator report as the vehicle's own u(k) "
+              "(observe-only), so its estimates are not those the live monitor computed", file=sys.stderr)
     vehicles: dict[int, VehicleSeries] = {}
     for record in result.records:
         vehicles.setdefault(record.sysid, VehicleSeries(record.sysid)).samples.append(record)

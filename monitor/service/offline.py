@@ -26,6 +26,8 @@ __all__ = ["LogAnalysis", "analyse_log"]
 
 log = logging.getLogger("monitor.analyse")
 
+_COMMAND_ID = 139  # SET_ACTUATOR_CONTROL_TARGET: a monitor flew this vehicle
+
 
 class _Collect:
     """The recorder interface: keep every record, and forward to a real recorder when there is one."""
@@ -67,6 +69,7 @@ def analyse_log(path: str | Path, fleet: Fleet, alarm: AlarmConfig, sysid: int |
     next_report = start + progress_every_s
     position = 0
     feed, on_frames, perf_ns = parser.feed, pipeline.on_frames, time.perf_counter_ns
+    commands = 0
     for t_us, frame in read_tlog(path, stats):
         if first is None:
             first = t_us
@@ -75,6 +78,8 @@ def analyse_log(path: str | Path, fleet: Fleet, alarm: AlarmConfig, sysid: int |
         frames = feed(frame)
         if not frames:
             continue
+        if frames[0][0] == _COMMAND_ID:
+            commands += 1
         if sysid is not None:
             frames = [f for f in frames if f[1] == sysid]
             if not frames:
@@ -89,4 +94,4 @@ def analyse_log(path: str | Path, fleet: Fleet, alarm: AlarmConfig, sysid: int |
     if last is not None:
         pipeline.flush(last * 1e-6, last * 1e-6)
     return LogAnalysis(collect.records, pipeline.counts(), stats.records, stats.skipped_bytes, stats.truncated,
-                       time.perf_counter() - start, first, last)
+                       time.perf_counter() - start, first, last, {"commands_in_log": commands})
