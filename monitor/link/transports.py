@@ -47,8 +47,12 @@ class ConnectionSpec:
     port: int
 
     def __str__(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"{self.kind}:{host}:{self.port}"
+        return format_connection(self.kind, self.host, self.port)
+
+
+def format_connection(kind: str, host: str, port: int) -> str:
+    """``udpin:127.0.0.1:14550``, ``udpin:[::1]:14550``: how MAVProxy users write a connection."""
+    return f"{kind}:[{host}]:{port}" if ":" in host else f"{kind}:{host}:{port}"
 
 
 def parse_connection(text: str, allow_remote: bool = True) -> ConnectionSpec:
@@ -181,7 +185,7 @@ class UdpLink(Link):
         sock.setblocking(False)
         self.sock = sock
         name = sock.getsockname()
-        self.local = f"udpin:{name[0]}:{name[1]}" if self.spec.kind == "udpin" else str(self.spec)
+        self.local = format_connection("udpin", name[0], name[1]) if self.spec.kind == "udpin" else str(self.spec)
         self._loop.add_reader(sock.fileno(), self._readable)
 
     def _readable(self) -> None:
@@ -314,7 +318,7 @@ class TcpLink(Link):
             except OSError as exc:
                 raise UserError(f"--mavlink {self.spec}: {exc.strerror or exc}") from None
             sock = self.server.sockets[0].getsockname()
-            self.local = f"tcpin:{sock[0]}:{sock[1]}"
+            self.local = format_connection("tcpin", sock[0], sock[1])
         else:
             self._task = loop.create_task(self._keep_connected(host, port))
 
