@@ -7,7 +7,10 @@
    pymavlink echo in its own process (recvfrom, ``parse_buffer``, on AOA_SSA encode and send the reply
    with pymavlink). Target: monitor p50 <= 1.5x echo p50 on one-message-per-datagram traffic.
 2. Answered fraction at 100 vehicles x 50 Hz, both framings. Target: >= 99 %.
-3. In-process cost per sample of ``Pipeline.on_frames`` (parse + assemble + estimator + command + FHAT
+3. Under a flood (``--flood``): 10 vehicles x 50 Hz one message per datagram while another process
+   sends 2,000 junk datagrams/s, each from a fresh source port (thousands of peers). Target: every sample
+   of the real vehicles answered.
+4. In-process cost per sample of ``Pipeline.on_frames`` (parse + assemble + estimator + command + FHAT
    feedback + Zenoh hand-off), both framings.
 
 The plant is paper-continuous re-sampled at h = 20 ms (50 Hz), with placeholder gains (the figures do not
@@ -192,6 +195,20 @@ def drive(port: int, vehicles: int, seconds: float, framing: str) -> tuple[list[
     return rtts, n * vehicles, len(rtts)
 
 
+FLOODER = r"""
+import os, socket, sys, time
+port, rate, seconds = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3])
+end, sent = time.monotonic() + seconds, 0
+while time.monotonic() < end:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.sendto(os.urandom(64), ("127.0.0.1", port))  # every datagram from a new ephemeral port
+    s.close()
+    sent += 1
+    time.sleep(max(0.0, sent / rate - (time.monotonic() - end + seconds)))
+print(sent)
+"""
+
+
 def pct(values: list[float], p: float) -> float:
     values = sorted(values)
     return values[min(len(values) - 1, int(p / 100 * len(values)))] * 1e6 if values else float("nan")
@@ -242,10 +259,24 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=10.0, help="length of each paced run (default: 10)")
     parser.add_argument("--skip-inprocess", action="store_true")
+    parser.add_argument("--flood", action="store_true", help="only the flood run")
     args = parser.parse_args()
     os.environ.setdefault("RERUN_ANALYTICS", "0")
     workdir = Path(tempfile.mkdtemp(prefix="bench-monitor-"))
     plant, gains = bench_plant(workdir)
+    if args.flood:
+        port = _free_udp_port()
+        proc = start_server("monitor", port, plant, gains, str(workdir / "monitor.log"))
+        flooder = subprocess.Popen([sys.executable, "-c", FLOODER, str(port), "2000", str(args.seconds + 1)],
+                                   stdout=subprocess.PIPE, text=True)
+        try:
+            rtts, sent, answered = drive(port, 10, args.seconds, "one message per datagram")
+        finally:
+            junk = flooder.communicate(timeout=args.seconds + 30)[0].strip()
+            stop_server(proc)
+        print(f"  flood of {junk} junk datagrams from fresh ports at 2,000/s: 10 x 50 Hz answered {answered}/{sent} "
+              f"({answered / sent:.2%}), round trip p50 {pct(rtts, 50):.0f} us p99 {pct(rtts, 99):.0f} us")
+        return
     if not args.skip_inprocess:
         inprocess(plant, gains)
     results: dict[tuple[str, str, int], tuple[list[float], int, int]] = {}
