@@ -185,3 +185,19 @@ def test_mutation_fuzz_of_captured_frames(model, signed: bool) -> None:
     for vehicle in pipeline.table.vehicles.values():
         assert all(math.isfinite(v) for v in vehicle.state.z)
     assert pipeline.frames.garbage > 0
+
+
+def test_a_clock_that_really_jumped_is_believed_after_a_while_but_a_forged_stamp_is_not(model) -> None:
+    table = VehicleTable(Fleet(model), AlarmConfig())
+    for k in range(3):
+        run(table, 1, k, "A", k * 0.02)
+    epoch = 1_700_000_000  # the vehicle switched its stamps from boot time to Unix time
+    t = 0.06
+    forged = run(table, 1, 10**6, "A", t)  # a single forged stamp amid ordinary samples: refused ...
+    assert forged == [] and run(table, 1, 3, "A", t + 0.01)[0].result.k == 3  # ... and forgotten
+    for i in range(12):
+        t += 0.25
+        done = run(table, 1, epoch + i, "A", t)
+    assert done and done[0].result.k == epoch + 11 and table.counters.restarts == 1
+    moved = run(table, 1, 5 * epoch, "B", t + 5.0)  # a new source after silence with a far-off clock: at once
+    assert moved and moved[0].result.k == 5 * epoch and table.counters.restarts == 2

@@ -47,6 +47,7 @@ APPLIED_WINDOW = 10  # commands judged applied or not, per vehicle
 NOT_APPLIED_ENTER = 5  # this many of the window not applied: the monitor says its commands do not act
 APPLIED_TOLERANCE = 1e-3  # relative: float32 on the wire twice (command, report) is ~1e-7
 MAX_SPEEDUP = 100.0  # a vehicle's clock runs at most this much faster than ours (simulators with --speedup)
+CLOCK_JUMP_S = 2.0  # far-future stamps from the bound source alone for this long: its clock really jumped
 FUTURE_SLACK = 10  # samples a vehicle's clock may be ahead beyond that (jitter, lost samples)
 
 
@@ -145,7 +146,8 @@ class Vehicle:
 
     __slots__ = ("sysid", "model", "state", "alarm", "delay", "assembler", "route", "last_seen", "first_seen",
                  "processed", "skipped", "warned_missing", "last_command", "last_command_k", "no_report", "rejected",
-                 "last_reject_log", "applied", "commands_effective", "not_applied", "last_sample_at", "run")
+                 "last_reject_log", "applied", "commands_effective", "not_applied", "last_sample_at", "run",
+                 "future_since")
 
     def __init__(self, sysid: int, model: VehicleModel, alarm: AlarmConfig, route: object, now: float,
                  observe: bool, wait_s: float, run: int = 0) -> None:
@@ -166,6 +168,7 @@ class Vehicle:
         self.applied: deque[bool] = deque(maxlen=APPLIED_WINDOW)  # were the last commands seen to act?
         self.commands_effective = True
         self.last_sample_at: float | None = None
+        self.future_since: float | None = None
 
 
 @dataclass
@@ -255,27 +258,44 @@ class VehicleTable:
             if vehicle is None:
                 return []
         asm = vehicle.assembler
+        k = asm.index_of(name, values)
+        instant = name == asm.signals.instant
+        max_k = self._max_k(vehicle, now)
         if route != vehicle.route:
             if now - vehicle.last_seen < self.restart_silence and _alive(vehicle.route):
                 self.counters.foreign_source += 1
                 return []
-            k = asm.index_of(name, values)
-            if name == asm.signals.instant and asm.last_k is not None and k is not None and k < asm.last_k:
-                log.info("vehicle sysid %d restarted (new source %s, k %d -> %d): fresh estimator",
-                         sysid, _where(route), asm.last_k, k)
-                self.counters.restarts += 1
-                self._retire(sysid)
-                return self.message(sysid, name, values, route, now)
+            if instant and k is not None and asm.last_k is not None and (k < asm.last_k or (max_k and k > max_k)):
+                return self._restart(vehicle, name, values, route, now, "new source", k)
             log.info("vehicle sysid %d now speaks from %s (was %s, silent %.1f s)", sysid, _where(route),
                      _where(vehicle.route), now - vehicle.last_seen)
             vehicle.route = route
-        max_k = None
-        if asm.last_k is not None and vehicle.last_sample_at is not None:
-            ahead = (now - vehicle.last_sample_at) * MAX_SPEEDUP / vehicle.model.plant.h
-            max_k = asm.last_k + FUTURE_SLACK + int(min(ahead, 1e9))
+        if max_k is not None and k is not None and k > max_k and instant:
+            # beyond where its clock can be: refused (the assembler counts it); but a clock that really jumped
+            # keeps stamping from there while no ordinary sample comes: after CLOCK_JUMP_S it is believed
+            if vehicle.future_since is None:
+                vehicle.future_since = now
+            elif now - vehicle.future_since >= CLOCK_JUMP_S:
+                return self._restart(vehicle, name, values, route, now, "clock jumped", k)
         vehicle.last_seen = now
         ready = asm.add(name, values, route, now, max_k)
         return [(vehicle, s) for s in ready]
+
+    @staticmethod
+    def _max_k(vehicle: Vehicle, now: float) -> int | None:
+        """The newest instant the vehicle's clock can have reached by ``now`` (None before its first sample)."""
+        if vehicle.assembler.last_k is None or vehicle.last_sample_at is None:
+            return None
+        ahead = (now - vehicle.last_sample_at) * MAX_SPEEDUP / vehicle.model.plant.h
+        return vehicle.assembler.last_k + FUTURE_SLACK + int(min(ahead, 1e9))
+
+    def _restart(self, vehicle: Vehicle, name: str, values: tuple, route: object, now: float, why: str,
+                 k: int) -> list[tuple[Vehicle, AssembledSample]]:
+        log.info("vehicle sysid %d restarted (%s %s, k %d -> %d): fresh estimator", vehicle.sysid, why,
+                 _where(route), vehicle.assembler.last_k, k)
+        self.counters.restarts += 1
+        self._retire(vehicle.sysid)
+        return self.message(vehicle.sysid, name, values, route, now)
 
     def poll(self, now: float) -> list[tuple[Vehicle, AssembledSample]]:
         """Samples whose bounded wait for an actuator report has run out."""
@@ -301,6 +321,7 @@ class VehicleTable:
         sig = model.signals
         values = sample.values
         vehicle.last_sample_at = now if now is not None else vehicle.last_seen
+        vehicle.future_since = None
         reason = sig.reject_reason(values)
         if reason is not None:
             vehicle.rejected += 1
