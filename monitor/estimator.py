@@ -98,6 +98,8 @@ class Estimator:
         self._predict_T = predict
         self._m, self._N, self._nq = m, N, n + q
         self._U_rows = self._U.tolist()
+        self._B0_rows = plant.B0.tolist()
+        self._skipped = 0
         self._O_rows = self._O.tolist()
         self._lim = float(self.u_limit) if self.u_limit is not None else None
 
@@ -109,8 +111,8 @@ class Estimator:
         lim = self.u_limit
         return np.clip(u, -lim, lim) if lim is not None else u
 
-    def _advance(self, s: EstimatorState, k: int, u_prev, applied: bool | None = None) -> int:
-        """Predict over lost samples up to k, then put the reported u(k-1) in the state.
+    def _advance(self, s: EstimatorState, k: int, u_prev, applied: bool | None = None) -> list[float]:
+        """Predict over lost samples up to k, put the reported u(k-1) in; returns z as a list of floats.
 
         ``applied is False`` (the vehicle reports that the command for k-1 never acted): the last step
         assumed ``B0 u(k-1)`` over the interval's tail while the actuator held the reported deflection the
@@ -119,33 +121,36 @@ class Estimator:
         """
         if s.k_last is not None and k <= s.k_last:
             raise ValueError(f"sample {k} is not newer than {s.k_last}")
-        skipped = 0
+        self._skipped = 0
         if s.k_last is not None:
             gap = k - s.k_last - 1
             if gap > self.max_gap:
                 s.z = np.zeros(self._N)
             elif gap:
                 s.z = np.linalg.matrix_power(self._predict_T, gap) @ s.z
-                skipped = gap
+                self._skipped = gap
+        z = s.z.tolist()
         if u_prev is not None:
-            if applied is False and not skipped:
-                n, nq = s.n, self._nq
-                s.z[:n] += self.plant.B0 @ (np.asarray(u_prev, dtype=float) - s.z[nq:])
-            s.z[self._nq :] = u_prev
-        return skipped
+            nq = self._nq
+            held = [float(e) for e in u_prev]
+            if applied is False and not self._skipped:
+                delta = [a - b for a, b in zip(held, z[nq:])]
+                for i, row in enumerate(self._B0_rows):
+                    z[i] += sum(map(mul, row, delta))
+            z[nq:] = held
+        return z
 
-    def _finish(self, s: EstimatorState, k: int, v: list[float], u: list[float], skipped: int) -> StepResult:
+    def _finish(self, s: EstimatorState, k: int, v: list[float], u: list[float]) -> StepResult:
         """``v = [x_hat; f_hat; u(k-1); y]`` and the u(k) that acted: eq. (5), then the new state."""
         w = v + u
         out = [sum(map(mul, row, w)) for row in self._O_rows]
-        nq = self._nq
+        n, nq = s.n, self._nq
         z_next = out[:nq] + u
         reset = not all(map(math.isfinite, z_next))
-        z = s.z
         s.z = np.zeros(self._N) if reset else np.array(z_next)
         s.k_last = k
-        return StepResult(k=k, u=np.array(u), x_hat=z[: s.n], f_hat=z[s.n : nq], residual=np.array(out[nq:]),
-                          skipped=skipped, reset=reset)
+        return StepResult(k=k, u=np.array(u), x_hat=np.array(v[:n]), f_hat=np.array(v[n:nq]),
+                          residual=np.array(out[nq:]), skipped=self._skipped, reset=reset)
 
     def step(self, s: EstimatorState, k: int, y, u_prev=None, applied: bool | None = None) -> StepResult:
         """Process sample k in place and return the command. Raises ValueError for a stale or duplicate k.
@@ -153,16 +158,14 @@ class Estimator:
         ``u_prev``: the deflection the vehicle reports at k (None: the estimator's own last command);
         ``applied``: whether that report shows the command for k-1 acted (False: see ``_advance``).
         """
-        skipped = self._advance(s, k, u_prev, applied)
-        v = s.z.tolist() + [float(e) for e in np.ravel(y)]
+        v = self._advance(s, k, u_prev, applied) + [float(e) for e in np.ravel(y)]
         u = [sum(map(mul, row, v)) for row in self._U_rows]
         lim = self._lim
         if lim is not None:
             u = [lim if e > lim else -lim if e < -lim else e for e in u]
-        return self._finish(s, k, v, u, skipped)
+        return self._finish(s, k, v, u)
 
     def observe(self, s: EstimatorState, k: int, y, u_now, u_prev=None) -> StepResult:
         """Observe-only: eq. (5) with the u(k) the vehicle's own controller issued (no command computed)."""
-        skipped = self._advance(s, k, u_prev)
-        v = s.z.tolist() + [float(e) for e in np.ravel(y)]
-        return self._finish(s, k, v, [float(e) for e in np.ravel(u_now)], skipped)
+        v = self._advance(s, k, u_prev) + [float(e) for e in np.ravel(y)]
+        return self._finish(s, k, v, [float(e) for e in np.ravel(u_now)])

@@ -120,11 +120,12 @@ class SampleAssembler:
         return int(round(self._instant_us(int(values[spec[0]]), spec[1]) / self.h_us))
 
     def add(self, message: str, values: tuple, route: object, now: float,
-            max_k: int | None = None) -> list[AssembledSample]:
+            max_k: int | None = None, k: int | None = None) -> list[AssembledSample]:
         """File one decoded message (``values``: its unpacked payload) under its instant.
 
         ``max_k``: the newest instant the vehicle's clock can have reached; parts beyond it are refused
         (``future``), so a forged far-future stamp can neither be processed nor lock later samples out.
+        ``k``: the message's sample index when the caller already computed it (``index_of``).
         """
         spec = self._parts.get(message)
         if spec is None:
@@ -132,7 +133,8 @@ class SampleAssembler:
         self.seen.add(message)
         t_pos, unit_us, signals = spec
         t_us = self._instant_us(int(values[t_pos]), unit_us)
-        k = int(round(t_us / self.h_us))
+        if k is None:
+            k = int(round(t_us / self.h_us))
         c = self.counters
         if max_k is not None and k > max_k:
             c.future += 1

@@ -18,6 +18,7 @@ import logging
 import os
 import signal
 import socket
+import sys
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -32,6 +33,8 @@ from monitor.service.vehicles import Fleet, VehicleTable
 __all__ = ["MonitorConfig", "build_pipeline", "run_daemon", "default_name"]
 
 log = logging.getLogger("monitor.run")
+
+SWITCH_INTERVAL_S = 0.0005
 
 
 def default_name() -> str:
@@ -126,6 +129,9 @@ def run_daemon(config: MonitorConfig, zenoh_config) -> int:
     from monitor.service.publisher import EstimatePublisher
     from monitor.wire.zenoh_session import close_quietly, open_session
 
+    # the Zenoh and recorder threads share the GIL with the loop: a short switch interval bounds how long
+    # a datagram waits behind them (Python's default 5 ms would be a quarter of a 50 Hz sample period)
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     session = open_session(zenoh_config)
     publisher = truth_sub = recorder = None
     try:

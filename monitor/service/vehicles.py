@@ -260,7 +260,10 @@ class VehicleTable:
         asm = vehicle.assembler
         k = asm.index_of(name, values)
         instant = name == asm.signals.instant
-        max_k = self._max_k(vehicle, now)
+        last_k = asm.last_k
+        # where the vehicle's clock can be: only worth working out for a stamp beyond the usual slack
+        max_k = (self._max_k(vehicle, now) if last_k is not None and k is not None and k > last_k + FUTURE_SLACK
+                 else None)
         if route != vehicle.route:
             if now - vehicle.last_seen < self.restart_silence and _alive(vehicle.route):
                 self.counters.foreign_source += 1
@@ -278,7 +281,7 @@ class VehicleTable:
             elif now - vehicle.future_since >= CLOCK_JUMP_S:
                 return self._restart(vehicle, name, values, route, now, "clock jumped", k)
         vehicle.last_seen = now
-        ready = asm.add(name, values, route, now, max_k)
+        ready = asm.add(name, values, route, now, max_k, k)
         return [(vehicle, s) for s in ready]
 
     @staticmethod
