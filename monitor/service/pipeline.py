@@ -121,18 +121,21 @@ class Pipeline:
         r = p.result
         route = sample.route
         if route is not None:
+            # the command first, the ground-station feedback after it, in ONE write: a syscall saved per
+            # sample, and MAVLink peers read several frames per datagram as they do on a stream
             link, peer = route
+            out = b""
             if self.send_commands:
-                link.send(command_frame(link.encoder, vehicle.model.signals.command, vehicle.sysid, sample.time_usec,
-                                        r.u), peer)
+                out = command_frame(link.encoder, vehicle.model.signals.command, vehicle.sysid, sample.time_usec, r.u)
                 self.commands_sent += 1
             if self.gcs_feedback:
-                frames = fhat_frames(link.encoder, sample.time_usec, r.f_hat)
+                out += fhat_frames(link.encoder, sample.time_usec, r.f_hat)
                 if p.alarm_event is not None:
-                    frames += alarm_text_frame(link.encoder, vehicle.sysid, p.alarm_event, p.f_mag,
-                                               vehicle.model.plant.unit)
-                link.send(frames, peer)
+                    out += alarm_text_frame(link.encoder, vehicle.sysid, p.alarm_event, p.f_mag,
+                                            vehicle.model.plant.unit)
                 self.feedback_sent += 1
+            if out:
+                link.send(out, peer)
         raised = vehicle.alarm.raised
         if self.publisher is not None:
             self.publisher.estimate((vehicle.sysid, r.k, p.t, r.f_hat, r.x_hat, r.residual, r.u, p.tau_obs, raised,
