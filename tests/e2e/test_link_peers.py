@@ -14,7 +14,7 @@ from monitor.design.result import DesignResult
 from monitor.gains import write_gains
 from monitor.plant import load_plant, parse_plant
 from monitor.wire.mavlink import mavlink, new_codec
-from tests.daemons import Daemon, free_tcp_port, free_udp_port, wait_for
+from tests.daemons import REPO, Daemon, free_tcp_port, free_udp_port, wait_for
 from tests.e2e.test_monitor_paper import gains_file, processed_count, wait_ready  # noqa: F401 (fixture)
 from tests.e2e.wire_peer import (PeerVehicle, check_against_equations, fly_tcp_client, fly_tcp_server, fly_udp,
                                  read_gains)
@@ -97,31 +97,7 @@ def test_a_vehicle_that_never_sends_aoa_ssa_gets_one_warning_naming_it(tmp_path:
     assert "WARNING" in warnings[0] and "sysid 12" in warnings[0] and "missing AOA_SSA" in warnings[0]
 
 
-SECOND_AIRFRAME = """
-form = "continuous"
-name = "alpha-q-airframe"
-unit = "deg"
-h = 1.0
-tau_min = 0.0
-tau_max = 0.4612
-A_c = [[-2.9736822991216285, 3.9467358499909526], [2.959515354615293, -6.918272017600894]]
-B_c = [[-2.7543402664177874], [6.7129500074472235]]
-D_cf = [[-0.06902315805819086], [0.9502696302859159]]
-D_cd = [[-0.793053089247175], [1.5323396625294068]]
-C = [[1.0, 0.0], [0.0, 1.0]]
-
-[actuator]
-limit = 30.0
-
-[signals]
-instant = "AOA_SSA"
-outputs = ["alpha", "q"]
-actuator = ["elevator"]
-[signals.measured]
-alpha = { field = "AOA_SSA.AOA", unit = "deg" }
-q = { field = "ATTITUDE.pitchspeed", scale = 57.29577951308232, unit = "deg/s" }
-elevator = { field = "ACTUATOR_OUTPUT_STATUS.actuator[0]", unit = "deg" }
-"""
+SECOND_AIRFRAME = (REPO / "docs/examples/alpha-q-airframe.toml").read_text()
 
 
 def test_a_second_airframe_whose_C_reads_alpha_and_q(tmp_path: Path) -> None:
