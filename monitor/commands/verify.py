@@ -42,7 +42,8 @@ def _inline_gains(args: argparse.Namespace, plant):
     mats = {n: parse_gain_matrix(getattr(args, n), n) for n in ("L", "M", "K1")}
     mats["K2"] = parse_gain_matrix(args.K2, "K2") if args.K2 else K2_default
     mats["K3"] = parse_gain_matrix(args.K3, "K3") if args.K3 else K3_default
-    return Gains(**mats)
+    assumed = [n for n in ("K2", "K3") if not getattr(args, n)]
+    return Gains(**mats), assumed
 
 
 def run(args: argparse.Namespace) -> int:
@@ -52,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     from monitor.verify import verify_gains
 
     plant = load_plant(args.plant)
-    certificate, gamma_e, gamma_z, method, warning = {}, None, None, "inline", None
+    certificate, gamma_e, gamma_z, method, warning, assumed = {}, None, None, "inline", None, []
     if args.gains:
         if any(getattr(args, n) is not None for n in ("L", "M", "K1", "K2", "K3")):
             raise UserError("give either --gains FILE or inline gains (--L, --M, --K1, ...), not both")
@@ -64,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
             warning = f"gains were designed for another plant ({gf.meta.get('plant')}); checking them on {plant.source}"
             certificate = {}
     else:
-        gains = _inline_gains(args, plant)
+        gains, assumed = _inline_gains(args, plant)
     try:
         gains.check_shapes(plant)
     except ValueError as exc:
@@ -72,18 +73,25 @@ def run(args: argparse.Namespace) -> int:
     verdict = verify_gains(plant, gains, certificate or None, gamma_e, gamma_z)
     if args.json:
         out = {k: (None if isinstance(v, float) and math.isinf(v) else v) for k, v in verdict.as_dict().items()}
-        out.update(method=method, plant=plant.source, warning=warning)
+        out.update(method=method, plant=plant.source, warning=warning, assumed=assumed,
+                   gains={n: getattr(gains, n).tolist() for n in _GAIN_NAMES})
         print(json.dumps(out))
     else:
-        _print_table(verdict, plant, method, warning)
+        _print_table(verdict, plant, method, warning, gains, assumed)
     return 0 if verdict.stable else 1
 
 
-def _print_table(v, plant, method: str, warning: str | None) -> None:
+_GAIN_NAMES = ("L", "M", "K1", "K2", "K3")
+
+
+def _print_table(v, plant, method: str, warning: str | None, gains, assumed: list[str]) -> None:
+    """The verdict, with every gain it was reached with (K2/K3 marked when they were assumed, not given)."""
     fmt = lambda x: "-" if x is None else ("inf" if isinstance(x, float) and math.isinf(x) else f"{x:.4f}")  # noqa: E731
     rows = [
         ("plant", f"{plant.name} ({plant.source}), tau in [{plant.tau_min}, {plant.tau_max}] s"),
         ("gains", method),
+        *((f"  {n}", str(getattr(gains, n).tolist()) + ("  (assumed: Lemma 3, as printed)" if n in assumed else ""))
+          for n in _GAIN_NAMES),
         ("verdict", "STABLE for every delay in the interval" if v.stable else "UNSTABLE"),
         ("rho_max (constant tau)", f"{fmt(v.rho_max)} at tau = {v.tau_worst:.4f}"),
         ("rho, time-varying tau", fmt(v.rho_time_varying)),
