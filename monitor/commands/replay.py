@@ -56,6 +56,10 @@ def run(args: argparse.Namespace) -> int:
 
     if not 0 < args.tol < 1:
         raise UserError(f"--tol must be a fraction in (0, 1), got {args.tol}")
+    if args.fault is not None:
+        from monitor.wire.specs import parse_fault_spec
+
+        parse_fault_spec(args.fault)  # a bad SPEC is one line before the file is read, truth or not
     report = analyse(load_recording(args.file), sysid=args.sysid, fault_spec=args.fault, tol=args.tol)
     if args.json:
         print(json.dumps(report))
@@ -93,7 +97,11 @@ def _vehicle_lines(v: dict[str, Any]) -> list[str]:
         alarm = f"k={v['first_alarm_k']} (t={_num(v['first_alarm_t'], ' s', '.3f')})"
         if v["detection_steps"] is not None:
             alarm += f"; detected {v['detection_steps']} steps ({_num(v['detection_s'], ' s')}) after onset"
-    lines.append(f"  first alarm    {alarm}; {v['false_alarms']} false alarm(s) before onset")
+    false = ("false alarms unknown (no truth, no --fault SPEC)" if v["false_alarms"] is None
+             else f"{v['false_alarms']} false alarm(s) before onset")
+    lines.append(f"  first alarm    {alarm}; {false}")
+    if v.get("fault_note"):
+        lines.append(f"  note           {v['fault_note']}")
     if v["onset_k"] is not None:
         settle = ("never within the band" if v["settling_steps"] is None else
                   f"{v['settling_steps']} steps ({_num(v['settling_s'], ' s')}) after onset")
@@ -125,5 +133,5 @@ def format_report(report: dict[str, Any]) -> str:
     if len(report["sysids"]) > 1:
         lines.append(f"fleet: {report['samples']} samples, worst settling {_num(report['settling_steps'])} "
                      f"steps, worst rms e_f {_num(report['rms_ef'])}, peak |alpha| "
-                     f"{_num(report['peak_alpha'], ' deg')}, {report['false_alarms']} false alarm(s)")
+                     f"{_num(report['peak_alpha'], ' deg')}, {_num(report['false_alarms'])} false alarm(s)")
     return "\n".join(lines)
