@@ -11,7 +11,6 @@ a bounded wait); every wait has a deadline.
 
 from __future__ import annotations
 
-import errno
 import json
 import os
 import socket
@@ -24,7 +23,7 @@ from pathlib import Path
 from typing import Callable
 
 from monitor.errors import UserError
-from monitor.process import stop_process_group
+from monitor.process import stop_process_group, udp_port_taken
 
 __all__ = ["Scenario", "LiveRun", "run_live", "free_port"]
 
@@ -59,15 +58,6 @@ def free_port(kind: int) -> int:
     with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-def _udp_port_taken(port: int) -> bool:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        try:
-            s.bind(("127.0.0.1", port))
-        except OSError as exc:
-            return exc.errno == errno.EADDRINUSE
-        return False
 
 
 def _wait(predicate: Callable[[], bool], timeout: float, what: str, proc: subprocess.Popen | None = None,
@@ -139,7 +129,7 @@ def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progre
         token = f"uav/monitor/{name}"
         _wait(lambda: any(True for _ in session.liveliness().get(token, timeout=0.2)), 60, f"monitor '{name}' on Zenoh",
               monitor.proc, monitor.log)
-        _wait(lambda: _udp_port_taken(uport), 20, f"monitor UDP port {uport}", monitor.proc, monitor.log)
+        _wait(lambda: udp_port_taken(uport), 20, f"monitor UDP port {uport}", monitor.proc, monitor.log)
         sim = _Daemon("sim_vehicle", ["run", "--plant", scenario.plant, "--mavlink", f"udpout:127.0.0.1:{uport}",
                                       "--sysid", str(scenario.sysid), "--steps", str(scenario.steps),
                                       "--speedup", str(scenario.speedup), "--fault", scenario.fault,

@@ -26,7 +26,6 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 
 from monitor.errors import UserError
 from monitor.estimator import Estimator, EstimatorState, StepResult

@@ -8,9 +8,7 @@ MAVProxy wrote during the live run, analysed offline, must give the same f_hat a
 
 from __future__ import annotations
 
-import errno
 import json
-import socket
 import subprocess
 import sys
 from collections import Counter
@@ -19,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from monitor.process import udp_port_taken
 from tests.daemons import Daemon, free_tcp_port, free_udp_port, wait_for
 from tests.e2e.test_monitor_paper import gains_file, processed_count, wait_ready  # noqa: F401 (fixture)
 
@@ -31,15 +30,6 @@ def _mavproxy_script() -> str:
     if not script.exists():
         pytest.fail("mavproxy.py not found beside the interpreter: install the test extra (pip install '.[test]')")
     return str(script)
-
-
-def _port_in_use(port: int) -> bool:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        try:
-            s.bind(("127.0.0.1", port))
-        except OSError as exc:
-            return exc.errno == errno.EADDRINUSE
-    return False
 
 
 class MavProxy(Daemon):
@@ -55,7 +45,7 @@ class MavProxy(Daemon):
 
     def __enter__(self) -> "MavProxy":
         super().__enter__()
-        wait_for(lambda: _port_in_use(self.master) or self.proc.poll() is not None, 30, what="MAVProxy listening")
+        wait_for(lambda: udp_port_taken(self.master) or self.proc.poll() is not None, 30, what="MAVProxy listening")
         assert self.proc.poll() is None, self.log()
         return self
 
