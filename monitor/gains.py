@@ -24,7 +24,8 @@ from monitor.plant import Plant
 __all__ = ["GainsFile", "write_gains", "read_gains", "parse_gain_matrix"]
 
 GAIN_NAMES = ("L", "M", "K1", "K2", "K3")
-_GAINS_KEYS = set(GAIN_NAMES) | {"method", "gamma_e", "gamma_z", "plant_hash", "plant", "bounds_apply_to"}
+_GAINS_KEYS = set(GAIN_NAMES) | {"method", "objective", "max_losses", "gamma_e", "gamma_z", "plant_hash", "plant",
+                                 "bounds_apply_to"}
 _TOP_KEYS = {"gains", "solver", "certificate", "notes"}
 
 
@@ -65,6 +66,8 @@ def write_gains(path: str | Path, result: DesignResult, plant: Plant) -> None:
             "bounds_apply_to": result.bounds_apply_to,
             "plant": plant.source,
             "plant_hash": plant.digest,
+            **({"objective": result.objective} if result.objective else {}),
+            **({"max_losses": result.max_losses} if result.max_losses else {}),
         },
         "solver": {
             "name": "CLARABEL",

@@ -196,6 +196,7 @@ def design_certified(
     gains = Gains(L=best.L, M=best.M, K1=K1, K2=K2, K3=fault_cancelling_K3(plant, K2))
     return DesignResult(
         method="certified",
+        objective="hinf",
         gains=gains,
         gamma_e=best.gamma_e,
         gamma_z=best.gamma_z,

@@ -24,3 +24,5 @@ class DesignResult:
     certificate: dict[str, np.ndarray] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     bounds_apply_to: str = "real closed loop, every tau in the interval, time-varying"
+    objective: str | None = None  # certified designs: "fast" or "hinf"
+    max_losses: int = 0  # the certificate also covers every pattern with at most this many consecutive losses
