@@ -98,7 +98,6 @@ class Estimator:
         self._predict_T = predict
         self._m, self._N, self._nq = m, N, n + q
         self._U_rows = self._U.tolist()
-        self._B0_rows = plant.B0.tolist()
         self._skipped = 0
         self._O_rows = self._O.tolist()
         self._lim = float(self.u_limit) if self.u_limit is not None else None
@@ -133,12 +132,26 @@ class Estimator:
         if u_prev is not None:
             nq = self._nq
             held = [float(e) for e in u_prev]
-            if applied is False and not self._skipped:
-                delta = [a - b for a, b in zip(held, z[nq:])]
-                for i, row in enumerate(self._B0_rows):
-                    z[i] += sum(map(mul, row, delta))
+            if applied is False:
+                self._held_correction(z, held)
             z[nq:] = held
         return z
+
+    def _held_correction(self, z: list[float], held: list[float]) -> None:
+        """Redo the last step, and the samples predicted since, with the held deflection instead of u(k-1).
+
+        The step at k-1 assumed ``B0 u(k-1)`` and each lost sample after it assumed the actuator held
+        u(k-1); in fact it held ``held`` all along. With ``delta = held - u(k-1)`` the error in ``x_hat`` is
+        ``B0 delta`` after the step, then ``A (.) + (B0 + B1) delta`` per predicted sample (f_hat is not
+        affected: no innovation used u). Rare (a lost or late command), so numpy is fine here.
+        """
+        n, nq = self.plant.n, self._nq
+        delta = np.array(held) - np.array(z[nq:])
+        correction = self.plant.B0 @ delta
+        for _ in range(self._skipped):
+            correction = self.plant.A @ correction + (self.plant.B0 + self.plant.B1) @ delta
+        for i in range(n):
+            z[i] += float(correction[i])
 
     def _finish(self, s: EstimatorState, k: int, v: list[float], u: list[float]) -> StepResult:
         """``v = [x_hat; f_hat; u(k-1); y]`` and the u(k) that acted: eq. (5), then the new state."""

@@ -28,6 +28,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--method", choices=METHODS, default="certified", help="design method (default: certified)")
     parser.add_argument("--objective", choices=OBJECTIVES, default=None,
                         help="certified method only: fast (the default) or hinf (the joint H-infinity design)")
+    parser.add_argument("--max-losses", type=int, default=0, metavar="N",
+                        help="also certify stability through up to N consecutive lost samples or lost/late commands "
+                             "(any mix, any delays in the interval); the design fails if no certificate exists "
+                             "(default: 0, losses not certified)")
     parser.add_argument("--out", required=True, metavar="GAINS.toml", help="gains file to write (only on success)")
     parser.add_argument("--weight-y", type=float, default=0.1, metavar="W",
                         help="weight of gamma_z^2 (output bound) next to gamma_e^2 in the objective (default: 0.1)")
@@ -49,7 +53,9 @@ def run(args: argparse.Namespace) -> int:
     plant = load_plant(args.plant)
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     say(f"designing ({args.method}) for plant '{plant.name}' ({plant.source}), tau in [{plant.tau_min}, {plant.tau_max}] s ...")
-    options = {"weight_y": args.weight_y}
+    if args.max_losses < 0:
+        raise UserError(f"--max-losses must be >= 0, got {args.max_losses}")
+    options = {"weight_y": args.weight_y, "max_losses": args.max_losses}
     if args.objective:
         options["objective"] = args.objective
     if args.method == "certified" and not args.quiet:

@@ -16,7 +16,12 @@ def register(sub: argparse._SubParsersAction) -> None:
             "the gains alone, and report: the worst spectral radius over a dense grid of constant delays, the growth\n"
             "rate under randomly time-varying delays, the worst H-infinity norms w=[d; delta f] -> e_f and -> y\n"
             "(frequency sweep), and, when the gains file carries one, the certificate re-checked in numpy.\n"
-            "Exit code 0 only when the loop is stable for every delay in the plant's interval, 1 otherwise."
+            "With --max-losses N, also every pattern of at most N consecutive lost samples or lost/late commands\n"
+            "(the contract's semantics): divergent patterns are searched (adversarial, bursts, alternating,\n"
+            "random) and stability is claimed only with a proof (a norm in which every loss run followed by a\n"
+            "delivered sample contracts, at every vertex of the delay polytope; the file's P_loss is re-checked).\n"
+            "Exit code 0 only when the loop is stable for every delay in the plant's interval (and proven stable\n"
+            "for every loss pattern with --max-losses), 1 otherwise."
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -24,6 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--gains", metavar="GAINS.toml", help="gains file written by `fault-monitor design`")
     for name, example in (("L", "1.87,1.63"), ("M", "7.0"), ("K1", "-0.2"), ("K2", "0.7"), ("K3", "-0.1")):
         parser.add_argument(f"--{name}", metavar="MAT", help=f"gain {name} given inline, e.g. {example} (column; rows with ';')")
+    parser.add_argument("--max-losses", type=int, default=None, metavar="N",
+                        help="also check every pattern with at most N consecutive losses (N >= 0)")
     parser.add_argument("--json", action="store_true", help="print the verdict as one JSON object")
     parser.set_defaults(func=run)
 
@@ -70,21 +77,33 @@ def run(args: argparse.Namespace) -> int:
         gains.check_shapes(plant)
     except ValueError as exc:
         raise UserError(str(exc)) from None
+    if args.max_losses is not None and args.max_losses < 0:
+        raise UserError(f"--max-losses must be >= 0, got {args.max_losses}")
     verdict = verify_gains(plant, gains, certificate or None, gamma_e, gamma_z)
+    losses = None
+    if args.max_losses is not None:
+        from monitor.verify_losses import verify_losses
+
+        losses = verify_losses(plant, gains, args.max_losses, certificate or None)
     if args.json:
         out = {k: (None if isinstance(v, float) and math.isinf(v) else v) for k, v in verdict.as_dict().items()}
         out.update(method=method, plant=plant.source, warning=warning, assumed=assumed,
                    gains={n: getattr(gains, n).tolist() for n in _GAIN_NAMES})
+        if losses is not None:
+            out["losses"] = {k: (None if isinstance(v, float) and math.isinf(v) else v)
+                             for k, v in losses.as_dict().items()}
+            out["stable_with_losses"] = bool(verdict.stable and losses.stable is True)
         print(json.dumps(out))
     else:
-        _print_table(verdict, plant, method, warning, gains, assumed)
-    return 0 if verdict.stable else 1
+        _print_table(verdict, plant, method, warning, gains, assumed, losses)
+    ok = verdict.stable and (losses is None or losses.stable is True)
+    return 0 if ok else 1
 
 
 _GAIN_NAMES = ("L", "M", "K1", "K2", "K3")
 
 
-def _print_table(v, plant, method: str, warning: str | None, gains, assumed: list[str]) -> None:
+def _print_table(v, plant, method: str, warning: str | None, gains, assumed: list[str], losses=None) -> None:
     """The verdict, with every gain it was reached with (K2/K3 marked when they were assumed, not given)."""
     fmt = lambda x: "-" if x is None else ("inf" if isinstance(x, float) and math.isinf(x) else f"{x:.4f}")  # noqa: E731
     rows = [
@@ -101,6 +120,13 @@ def _print_table(v, plant, method: str, warning: str | None, gains, assumed: lis
         ("certificate", {True: "valid", False: "INVALID", None: "none"}[v.certificate_valid] + f": {v.certificate_detail}"),
         ("claimed bounds hold", {True: "yes", False: "no", None: "-"}[v.bound_holds]),
     ]
+    if losses is not None:
+        verdict = {True: "STABLE (proven)", False: "UNSTABLE", None: "NOT PROVEN"}[losses.stable]
+        rows += [
+            (f"losses (<= {losses.max_losses} in a row)", verdict),
+            ("  worst growth found", f"{fmt(losses.growth_lower_bound)} per sample ({losses.worst_pattern})"),
+            ("  proof", losses.proof),
+        ]
     if warning:
         rows.append(("warning", warning))
     width = max(len(r[0]) for r in rows)

@@ -19,6 +19,11 @@ OBJECTIVES = ("fast", "hinf")
 def run_design(method: str, plant: Plant, **options) -> DesignResult:
     """Dispatch to the method's module; imported lazily because cvxpy's import costs about a second."""
     objective = options.pop("objective", None)
+    max_losses = int(options.pop("max_losses", 0) or 0)
+    if max_losses < 0:
+        raise ValueError(f"max_losses must be >= 0, got {max_losses}")
+    if max_losses and (method, objective) in (("certified", None), ("certified", "fast")):
+        options["max_losses"] = max_losses  # the fast search steers away from loss-divergent controllers
     if objective is not None and (method != "certified" or objective not in OBJECTIVES):
         raise ValueError(f"objective {objective!r} applies to the certified method only (choose from {', '.join(OBJECTIVES)})")
     if method == "certified" and objective in (None, "fast"):
@@ -32,4 +37,9 @@ def run_design(method: str, plant: Plant, **options) -> DesignResult:
     else:
         raise ValueError(f"unknown design method {method!r} (choose from {', '.join(METHODS)})")
     design: Callable[..., DesignResult] = fn
-    return design(plant, **options)
+    result = design(plant, **options)
+    if max_losses:
+        from monitor.design.loss_certificate import certify_losses
+
+        result = certify_losses(result, plant, max_losses)
+    return result

@@ -35,12 +35,14 @@ from monitor.delay_model import b0_of_tau, b0_polytope
 from monitor.design.certificate import CertificateLMI
 from monitor.design.result import DesignResult
 from monitor.errors import DesignFailed
+from monitor.loss_model import loss_sequences, macro_steps
 from monitor.plant import Plant
 from monitor.verify import hinf_norm
 
 __all__ = ["design_fast", "deadbeat_observer", "mismatch_energy"]
 
 PENALTY = 1e3
+LOSS_GROWTH_MAX = 0.99  # --max-losses: keep the search's loss growth below this, the certificate needs margin
 MAX_K2_RADIUS = 0.9  # the controller's own memory u(k) = K2 u(k-1) + ... must fade: no wind-up when saturated
 
 
@@ -79,6 +81,17 @@ def mismatch_energy(plant: Plant, gains: Gains, steady, horizon: int = 60) -> fl
     return worst
 
 
+def _loss_growth(plant: Plant, gains: Gains, steady, max_losses: int) -> float:
+    """Worst per-sample growth of the macro-steps with up to ``max_losses`` losses, at the interval's ends.
+
+    A lower bound of the switched loop's growth: the search's cheap guide; the certificate decides.
+    """
+    ends = [b0_of_tau(plant, t) for t in (plant.tau_min, plant.tau_max)]
+    steps = macro_steps(plant, gains, ends, max_losses, steady)
+    lengths = [len(seq) + 1 for _ in ends for seq in loss_sequences(max_losses)]
+    return max(float(np.max(np.abs(np.linalg.eigvals(S)))) ** (1.0 / n) for S, n in zip(steps, lengths))
+
+
 def _frozen_bounds(plant: Plant, gains: Gains, steady) -> tuple[float, float, float]:
     """Worst frozen-delay H-infinity norms (e_f, y~) and spectral radius at three delays: the search's proxy."""
     ge = gz = rho = 0.0
@@ -98,6 +111,7 @@ def design_fast(
     mismatch: float = 0.01,
     max_evaluations: int = 80,
     segments: int = 8,
+    max_losses: int = 0,
     progress: Callable[[int, float | None], None] | None = None,
 ) -> DesignResult:
     """Deadbeat-in-the-fault-direction observer, controller searched for the bounds under a mismatch budget."""
@@ -123,7 +137,8 @@ def design_fast(
             return PENALTY**2 * rho
         excess = max(0.0, mismatch_energy(plant, gains, steady) - mismatch) / mismatch
         memory = max(0.0, float(np.max(np.abs(np.linalg.eigvals(gains.K2)))) - MAX_K2_RADIUS)
-        value = ge**2 + weight_y * gz**2 + PENALTY * (excess + memory)
+        losses = max(0.0, _loss_growth(plant, gains, steady, max_losses) - LOSS_GROWTH_MAX) if max_losses else 0.0
+        value = ge**2 + weight_y * gz**2 + PENALTY * (excess + memory + losses)
         if progress is not None:
             progress(evaluations[0], ge)
         return value

@@ -369,9 +369,9 @@ class VehicleTable:
         return Processed(vehicle, sample, result, t, y, tau_obs, event, f_mag, applied)
 
     def _judge_applied(self, vehicle: Vehicle, k: int, reported: list[float]) -> bool | None:
-        """Did the command for k-1 act? The deflection reported at k says so; a streak says it to the log."""
-        if vehicle.last_command is None or vehicle.last_command_k != k - 1:
-            return None
+        """Did the last command (for k-1, or earlier when samples were lost since) act? The report at k says so."""
+        if vehicle.last_command is None or vehicle.last_command_k is None or vehicle.last_command_k >= k:
+            return None  # samples lost since the last command do not matter: no command was sent for them
         applied = all(abs(r - c) <= APPLIED_TOLERANCE * max(1.0, abs(c)) for r, c in zip(reported, vehicle.last_command))
         vehicle.applied.append(applied)
         if not applied:

@@ -1,0 +1,71 @@
+"""The real closed loop when the network loses samples or commands: a switched system with three modes.
+
+The contract's link events (CONTRACT.md, "What the estimator uses"), in the coordinates of
+``monitor.closed_loop`` (``xi = [x~; e_x; e_f; u~]``, deviations from the constant-fault steady state):
+
+* **delivered** (``closed_loop`` at ``B0(tau)``): the command for k acts after ``tau(k) < h``;
+* **command lost or late**: the actuator holds ``u(k-1)`` the whole period; the estimator, told so by the
+  next report, steps with the held deflection (``monitor.estimator``), so its error sees no delay mismatch:
+  ``x~+ = A x~ + (B0+B1) u~``, ``e_x+ = (A - L C) e_x + Df e_f``, ``e_f+ = e_f - M C e_x``, ``u~+ = u~``;
+* **sample lost**: no command, the actuator holds, the estimator predicts without innovation:
+  ``e_x+ = A e_x + Df e_f``, ``e_f+ = e_f``; the plant part as above.
+
+Neither loss mode depends on the delay, and both have an eigenvalue 1 (the held actuator, and for a lost
+sample the frozen fault estimate), so no loop is stable under losses alone: what can be certified is a
+bound N on **consecutive losses of either kind**. Every admissible sequence is then a product of
+*macro-steps* ``D(tau) X_j ... X_1`` (j <= N losses, each X a lost sample or a lost command, then a
+delivered sample), and ``D`` is affine in ``B0(tau)``, so a macro-step at any delay is a convex
+combination of the macro-steps at the vertices of a polytope that contains the delay curve.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from monitor.closed_loop import Gains, closed_loop, observer_indices
+from monitor.plant import Plant
+
+__all__ = ["loss_modes", "loss_sequences", "macro_steps", "LOSS_KINDS"]
+
+LOSS_KINDS = ("sample", "command")
+
+
+def loss_modes(plant: Plant, gains: Gains) -> dict[str, np.ndarray]:
+    """The state matrices of a lost sample and of a lost (or late) command; the inputs do not matter here."""
+    A, C, Df = plant.A, plant.C, plant.Df
+    Bsum = plant.B0 + plant.B1
+    sx, se, sf, su = observer_indices(plant)
+    N = su.stop
+    base = np.zeros((N, N))
+    base[sx, sx] = A
+    base[sx, su] = Bsum
+    base[se, se] = A
+    base[se, sf] = Df
+    base[sf, sf] = np.eye(plant.q)
+    base[su, su] = np.eye(plant.m)
+    sample = base.copy()
+    command = base.copy()
+    command[se, se] = A - gains.L @ C
+    command[sf, se] = -gains.M @ C
+    return {"sample": sample, "command": command}
+
+
+def loss_sequences(max_losses: int) -> list[tuple[str, ...]]:
+    """Every run of 0..N losses between two delivered samples, each loss of either kind."""
+    return [seq for j in range(max_losses + 1) for seq in itertools.product(LOSS_KINDS, repeat=j)]
+
+
+def macro_steps(plant: Plant, gains: Gains, b0_points: list[np.ndarray], max_losses: int,
+                steady: tuple[np.ndarray, np.ndarray]) -> list[np.ndarray]:
+    """``D(B0) X_j ... X_1`` for every loss run of length <= N and every ``B0`` given (vertices or a grid)."""
+    modes = loss_modes(plant, gains)
+    runs = []
+    for seq in loss_sequences(max_losses):
+        product = np.eye(modes["sample"].shape[0])
+        for kind in seq:
+            product = modes[kind] @ product
+        runs.append(product)
+    delivered = [closed_loop(plant, gains, b0, steady=steady).A for b0 in b0_points]
+    return [D @ run for D in delivered for run in runs]
