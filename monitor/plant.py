@@ -27,7 +27,7 @@ import numpy as np
 
 from monitor.errors import UserError
 
-__all__ = ["Plant", "ContinuousModel", "Actuator", "load_plant", "parse_plant", "preset_names"]
+__all__ = ["Plant", "ContinuousModel", "Actuator", "load_plant", "parse_plant", "plant_from_table", "with_tau_max", "preset_names"]
 
 PRESETS = {"paper": "paper.toml", "paper-continuous": "paper-continuous.toml"}
 
@@ -83,6 +83,7 @@ class Plant:
     source: str = "<memory>"
     digest: str = ""
     signals: dict[str, Any] | None = None  # the raw [signals] table (validated by monitor.link.signals)
+    raw: dict[str, Any] | None = field(default=None, repr=False)  # the parsed TOML, to derive variants
 
     @property
     def tau_bar(self) -> float:
@@ -138,6 +139,23 @@ def parse_plant(text: str, source: str = "<memory>") -> Plant:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise UserError(f"{source}: not valid TOML: {exc}") from None
+    return plant_from_table(raw, source)
+
+
+def with_tau_max(plant: Plant, tau_max: float) -> Plant:
+    """The same plant with another upper delay bound: what a plant file with that ``tau_max`` would give.
+
+    The nominal split moves with the interval's middle (continuous form; the discrete form keeps its
+    printed B0 as the nominal), and the digest is that of the edited file, so gains designed for the
+    variant are recognised by ``run`` when the user writes the file.
+    """
+    if plant.raw is None:
+        raise ValueError("this plant was not built from a plant table; it has no variants")
+    return plant_from_table({**plant.raw, "tau_max": float(tau_max)}, f"{plant.source} with tau_max = {tau_max:g}")
+
+
+def plant_from_table(raw: dict[str, Any], source: str) -> Plant:
+    """Validate a parsed plant table (see the module docstring) and build the Plant."""
     form = raw.get("form")
     if form not in ("continuous", "discrete"):
         raise UserError(f"{source}: key 'form' must be \"continuous\" or \"discrete\", got {form!r}")
@@ -171,6 +189,7 @@ def parse_plant(text: str, source: str = "<memory>") -> Plant:
         source=source,
         digest=_digest({k: v for k, v in raw.items() if k != "signals"}),
         signals=raw.get("signals"),
+        raw=raw,
     )
     if form == "continuous":
         A_c = reader.matrix("A_c", rows=n, cols=n)

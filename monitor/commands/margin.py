@@ -1,0 +1,85 @@
+"""``fault-monitor margin``: the largest delay bound tau_max for which a certified design exists."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "margin",
+        help="largest certifiable tau_max (bisection, a certificate at each step) and the curve gamma_e(tau_max)",
+        description=(
+            "How much delay could the loop take? Bisect on the upper delay bound tau_max in [tau_min, h): at each\n"
+            "probe design the certified gains for the plant with that interval and keep the probe only if its\n"
+            "certificate holds. Prints the margin and the curve gamma_e(tau_max) below it; --out writes the gains at\n"
+            "the margin (designed for [tau_min, tau_max]; run them with a plant file carrying that tau_max)."
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--plant", required=True, metavar="P", help="preset (paper, paper-continuous) or plant TOML file")
+    parser.add_argument("--objective", choices=("fast", "hinf"), default="fast",
+                        help="certified design objective used at each probe (default: fast)")
+    parser.add_argument("--tolerance", type=float, default=None, metavar="S",
+                        help="stop bisecting when the bracket is narrower than S seconds (default: h/200)")
+    parser.add_argument("--points", type=int, default=6, metavar="N", help="points of the gamma_e curve (default: 6)")
+    parser.add_argument("--json", action="store_true",
+                        help='print {"tau_max": ..., "curve": [{"tau_max": ..., "gamma_e": ...}, ...]} on stdout')
+    parser.add_argument("--out", metavar="GAINS.toml", help="write the gains designed at the margin")
+    parser.add_argument("--png", metavar="FILE", help="plot gamma_e against tau_max")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from monitor.errors import UserError
+    from monitor.gains import write_gains
+    from monitor.margin import delay_margin
+    from monitor.plant import load_plant
+
+    plant = load_plant(args.plant)
+    if args.tolerance is not None and not 0 < args.tolerance < plant.h:
+        raise UserError(f"--tolerance must be in (0, h = {plant.h}), got {args.tolerance}")
+    if args.points < 2:
+        raise UserError(f"--points must be >= 2, got {args.points}")
+    say = lambda text: print(text, file=sys.stderr, flush=True)  # noqa: E731
+    say(f"bisecting tau_max in [{plant.tau_min}, {plant.h}) for plant '{plant.name}' ({args.objective} design at each probe)")
+    margin = delay_margin(plant, tolerance=args.tolerance, curve_points=args.points, progress=say,
+                          objective=args.objective)
+    if args.out:
+        write_gains(args.out, margin.design, margin.plant)
+    if args.png:
+        _plot(margin, args.png, plant)
+    doc = {"tau_max": margin.tau_max, "curve": margin.curve, "h": plant.h, "tau_min": plant.tau_min,
+           "objective": args.objective, "gamma_e_at_margin": margin.design.gamma_e, "probes": margin.probes,
+           "plant_interval": [plant.tau_min, plant.tau_max]}
+    if args.json:
+        print(json.dumps(doc))
+    else:
+        print(f"delay margin  tau_max = {margin.tau_max:.4f} s ({margin.tau_max / plant.h:.1%} of h = {plant.h} s; "
+              f"the plant file says {plant.tau_max})")
+        for point in margin.curve:
+            print(f"  tau_max {point['tau_max']:.4f} s   gamma_e {point['gamma_e']:.4f}")
+        if args.out:
+            print(f"wrote gains at the margin to {args.out} (designed for tau in [{plant.tau_min}, {margin.tau_max:.4f}])")
+    return 0
+
+
+def _plot(margin, path: str, plant) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot([p["tau_max"] for p in margin.curve], [p["gamma_e"] for p in margin.curve], "o-", label="certified gamma_e")
+    ax.axvline(margin.tau_max, color="k", linestyle="--", label=f"margin {margin.tau_max:.3f} s")
+    ax.axvline(plant.tau_max, color="grey", linestyle=":", label=f"plant file tau_max {plant.tau_max}")
+    ax.set_xlabel("tau_max [s]")
+    ax.set_ylabel("gamma_e (w -> e_f)")
+    ax.set_title(f"Delay margin, {plant.name}")
+    ax.legend(loc="best")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
