@@ -1,4 +1,4 @@
-"""Design methods: each module turns a plant into gains (``certified``, ``paper``, ``separate``).
+"""Design methods: each module turns a plant into gains (``certified``, ``paper``, ``separate``, ``robust-separate``).
 
 One module per method so a new method is a new file, not a branch in an old one. ``certified`` has two
 objectives: ``fast`` (default, ``monitor.design.fast``) and ``hinf`` (the joint H-infinity design,
@@ -12,7 +12,7 @@ from typing import Callable
 from monitor.design.result import DesignResult
 from monitor.plant import Plant
 
-METHODS = ("certified", "paper", "separate")
+METHODS = ("certified", "paper", "separate", "robust-separate")
 OBJECTIVES = ("fast", "hinf")
 
 
@@ -34,6 +34,8 @@ def run_design(method: str, plant: Plant, **options) -> DesignResult:
         from monitor.design.paper import design_paper as fn
     elif method == "separate":
         from monitor.design.separate import design_separate as fn
+    elif method == "robust-separate":
+        from monitor.design.robust_separate import design_robust_separate as fn
     else:
         raise ValueError(f"unknown design method {method!r} (choose from {', '.join(METHODS)})")
     design: Callable[..., DesignResult] = fn

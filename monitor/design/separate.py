@@ -28,8 +28,13 @@ from monitor.verify import hinf_norm
 __all__ = ["design_separate", "observer_alone", "controller_alone"]
 
 
-def observer_alone(plant: Plant) -> tuple[np.ndarray, np.ndarray, float, str]:
-    """H-infinity-optimal (L, M) of the error system alone; returns L, M, gamma_e, solver status."""
+def observer_alone(plant: Plant, extra_inputs: list[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, float, str]:
+    """H-infinity-optimal (L, M) of the error system alone; returns L, M, gamma_e, solver status.
+
+    ``extra_inputs``: further n x k input matrices of ``e_x`` to be robust against, one LMI each with the
+    same Lyapunov and slack matrices (the robust separate design passes the vertices of ``B0(tau) - B0``,
+    the path by which the controller's increments disturb the estimate when the delay is not nominal).
+    """
     n, q, l, p = plant.n, plant.q, plant.l, plant.p
     A_o = np.block([[plant.A, plant.Df], [np.zeros((q, n)), np.eye(q)]])
     C_o = np.hstack([plant.C, np.zeros((l, q))])
@@ -39,7 +44,8 @@ def observer_alone(plant: Plant) -> tuple[np.ndarray, np.ndarray, float, str]:
     G = cp.Variable((n + q, n + q))
     Y = cp.Variable((n + q, l))  # Y = G^T [L; M]
     g = cp.Variable(nonneg=True)
-    problem = cp.Problem(cp.Minimize(g), [hinf_slack_lmi(X, G, G.T @ A_o - Y @ C_o, G.T @ B_o, C_f, g)])
+    inputs = [B_o] if not extra_inputs else [np.hstack([B_o, np.vstack([E, np.zeros((q, E.shape[1]))])]) for E in extra_inputs]
+    problem = cp.Problem(cp.Minimize(g), [hinf_slack_lmi(X, G, G.T @ A_o - Y @ C_o, G.T @ B, C_f, g) for B in inputs])
     try:
         status = solve_problem(problem)
     except SolveFailed as exc:
