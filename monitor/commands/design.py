@@ -29,6 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--method", choices=METHODS, default="certified", help="design method (default: certified)")
     parser.add_argument("--objective", choices=OBJECTIVES, default=None,
                         help="certified method only: fast (the default) or hinf (the joint H-infinity design)")
+    parser.add_argument("--mismatch", type=float, default=None, metavar="E",
+                        help="fast objective: energy of e_f a unit step fault may leave after the two deadbeat samples "
+                             "at the interval's ends (default: 0.01; larger trades settling for output regulation)")
     parser.add_argument("--max-losses", type=int, default=0, metavar="N",
                         help="also certify stability through up to N consecutive lost samples or lost/late commands "
                              "(any mix, any delays in the interval); the design fails if no certificate exists "
@@ -51,14 +54,18 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--weight-y must be >= 0, got {args.weight_y}")
     if args.objective and args.method != "certified":
         raise UserError(f"--objective applies to --method certified only, not {args.method}")
-    plant = load_plant(args.plant)
-    say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
-    say(f"designing ({args.method}) for plant '{plant.name}' ({plant.source}), tau in [{plant.tau_min}, {plant.tau_max}] s ...")
     if args.max_losses < 0:
         raise UserError(f"--max-losses must be >= 0, got {args.max_losses}")
     options = {"weight_y": args.weight_y, "max_losses": args.max_losses}
     if args.objective:
         options["objective"] = args.objective
+    if args.mismatch is not None:
+        if args.method != "certified" or args.objective == "hinf" or not args.mismatch > 0:
+            raise UserError("--mismatch takes a number > 0 and applies to the fast certified design only")
+        options["mismatch"] = args.mismatch
+    plant = load_plant(args.plant)
+    say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
+    say(f"designing ({args.method}) for plant '{plant.name}' ({plant.source}), tau in [{plant.tau_min}, {plant.tau_max}] s ...")
     if args.method == "certified" and not args.quiet:
         options["progress"] = lambda i, g: say(f"  candidate {i:3d}: " + (f"gamma_e = {g:.4f}" if g else "no certificate"))
     with warnings.catch_warnings():
