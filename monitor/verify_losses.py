@@ -22,6 +22,7 @@ whatever its origin, a P counts only through the numpy contraction check above.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
@@ -154,13 +155,16 @@ def verify_losses(plant: Plant, gains: Gains, max_losses: int, certificate: dict
         return LossVerdict(max_losses, False, growth, pattern, "none: a pattern diverges", None)
     vertices = b0_polytope(plant)
     steps = macro_steps(plant, gains, vertices, max_losses, steady)
-    candidates: list[tuple[str, np.ndarray | None]] = []
+    candidates: list[tuple[str, Any]] = []  # (name, P or a function making it: found lazily, cheapest first)
     if certificate and "P_loss" in certificate and certificate["P_loss"].shape == steps[0].shape:
         candidates.append(("the certificate's P_loss", certificate["P_loss"]))
-    candidates += [("P of the averaged Lyapunov equation", _averaged_lyapunov(steps)), ("the identity", np.eye(steps[0].shape[0]))]
-    candidates.append(("a P verify searched itself (LMI feasibility, re-checked here)", _searched_norm(plant, gains, vertices, max_losses)))
+    candidates += [("P of the averaged Lyapunov equation", lambda: _averaged_lyapunov(steps)),
+                   ("the identity", lambda: np.eye(steps[0].shape[0])),
+                   ("a P verify searched itself (LMI feasibility, re-checked here)",
+                    lambda: _searched_norm(plant, gains, vertices, max_losses))]
     for depth in (1, 2):
-        for name, P in candidates:
+        for name, make in candidates:
+            P = make() if callable(make) else make
             if P is None:
                 continue
             factor = contraction(P, steps, depth)

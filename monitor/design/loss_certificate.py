@@ -11,6 +11,7 @@ patterns without it.
 from __future__ import annotations
 
 import time
+import warnings
 
 import cvxpy as cp
 import numpy as np
@@ -46,7 +47,9 @@ def loss_certificate(plant: Plant, gains: Gains, vertices: list[np.ndarray], max
         constraints.append(0.5 * (lhs + lhs.T) << 0)
     problem = cp.Problem(cp.Minimize(t), constraints)
     try:
-        problem.solve(solver=cp.CLARABEL)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "may be inaccurate": the numpy re-check below decides
+            problem.solve(solver=cp.CLARABEL)
     except cp.error.SolverError:
         return None
     if P.value is None:
