@@ -13,12 +13,16 @@ turns the pending records into one Arrow batch per vehicle and ships it with ``s
   1 ms of fixed Rerun work per vehicle: small batches over many vehicles would spend the GIL on it;
   batches grow by themselves when the writer is busy (it takes everything pending). Between vehicles
   the writer yields the GIL (``sleep(0)``) so the loop never waits behind a whole flush;
-* never drop: the deque is unbounded. If the writer falls behind (it has ~50x headroom: see
+* never drop (the file): its deque is unbounded. If the writer falls behind (it has ~50x headroom: see
   ``benchmarks/bench_recorder.py``), memory grows until it catches up; nothing is discarded.
   ``close()`` writes whatever is left;
 * never raise into the loop: any failure in the writer is logged once per kind (one line) and counted
   in ``stats``; only the constructor raises (``UserError``, before the loop starts) when the file
-  cannot be created.
+  cannot be created;
+* one sink, one stream: the file is a ``FileSink``; each live viewer (``run --rerun-url``) is a
+  ``LiveSink`` (``live_sinks.py``) with its own ``RecordingStream``, queue and thread, because one
+  stream with several sinks goes at the pace of the slowest and a stalled viewer would hold up the file.
+  ``submit`` appends to every sink's queue; a live queue is bounded (drops its oldest), the file's not.
 
 Entity paths (units: deg, deg/s, s; vectors are split into one scalar entity per component ``<i>``)::
 
@@ -69,10 +73,13 @@ from monitor.service.records import SampleRecord, TruthRecord
 
 if TYPE_CHECKING:
     from monitor.closed_loop import Gains
+    from monitor.service.live_sinks import LiveSink
     from monitor.plant import Plant
 
 __all__ = [
     "RrdRecorder",
+    "StreamWriter",
+    "open_stream",
     "LAYOUT_VERSION",
     "PROPERTY_NAME",
     "SAMPLE_SCALARS",
@@ -258,69 +265,57 @@ def _by_sysid(records: Iterable[SampleRecord | TruthRecord]) -> dict[int, list]:
     return groups
 
 
-class RrdRecorder:
-    """Buffered, lossless, never-raising writer of ``SampleRecord``/``TruthRecord`` to one ``.rrd`` file.
+def open_stream(application_id: str, recording_id: str, properties: dict[str, str], recording_name: str,
+                attach: Callable[[Any], None]) -> Any:
+    """A ``RecordingStream`` with its sink attached (``attach``), the recording properties and name sent.
 
-    ``submit``/``submit_truth`` may be called from any thread (the loop, a Zenoh callback); ``close``
-    is idempotent and safe from a signal handler: it stops the writer, writes what is left, the
-    blueprint and the footer. It is also registered with ``atexit`` so a normal interpreter exit
-    leaves a complete file even when the caller forgets.
+    Every sink of one run gets its own stream with the same ``recording_id``, so a viewer that is shown
+    the file later (or reconnects) sees one recording, not several.
+    """
+    import rerun as rr
+
+    rec = rr.RecordingStream(application_id, recording_id=recording_id)
+    attach(rec)
+    rec.send_property(PROPERTY_NAME, rr.AnyValues(**{k: str(v) for k, v in properties.items()}))
+    rec.send_recording_name(recording_name)
+    return rec
+
+
+class StreamWriter:
+    """One Rerun sink, fed from its own queue by its own thread: the batching, the blueprint, never raising.
+
+    Why one per sink: a ``RecordingStream`` moves at the pace of its slowest sink, so a live viewer that
+    stalls must not share a stream (nor a thread, nor a queue) with the file. ``maxlen`` bounds the queue
+    (the oldest records go first and are counted in ``stats["dropped"]``); ``None`` keeps every record.
+    Subclasses set ``self._rec`` and decide what a failure means (``_fail_once``).
     """
 
-    def __init__(self, path: str | Path, application_id: str = "fault-monitor",
-                 properties: dict[str, str] | None = None, *, batch_size: int = 256, max_age_s: float = 0.5,
-                 poll_s: float = 0.01, recording_name: str | None = None) -> None:
-        import rerun as rr
-
-        self.path = Path(path)
+    def __init__(self, label: str, *, maxlen: int | None = None, batch_size: int = 256, max_age_s: float = 0.5,
+                 poll_s: float = 0.01) -> None:
+        self.label = label
         self.batch_size = batch_size
         self.max_age_s = max_age_s
         self.poll_s = poll_s
-        self._rr = rr
-        self._pending: collections.deque[SampleRecord | TruthRecord] = collections.deque()
+        self._rec: Any = None
+        self._pending: collections.deque[SampleRecord | TruthRecord] = collections.deque(maxlen=maxlen)
         self._oldest: float | None = None  # monotonic time of the oldest pending record (approximate)
         self._sysids: set[int] = set()
         self._blueprint_ids: frozenset[int] = frozenset()
         self._blueprint_at = -math.inf  # monotonic time of the last blueprint sent
         self._failures: set[str] = set()
-        self.error: str | None = None  # the first write failure, as one line (the daemon reports it)
         self._stop = threading.Event()
-        self._closed = False
-        self._close_lock = threading.Lock()
-        self.stats = {"submitted": 0, "written": 0, "failed": 0}
-
-        if self.path.is_dir() or not self.path.parent.is_dir():
-            raise UserError(f"cannot write recording {self.path}: not a file in an existing directory")
-        try:
-            self._rec = rr.RecordingStream(application_id)
-            self._rec.save(str(self.path), default_blueprint=default_blueprint(()))
-            props = {"layout": LAYOUT_VERSION, **software_versions(), **(properties or {})}
-            self._rec.send_property(PROPERTY_NAME, rr.AnyValues(**{k: str(v) for k, v in props.items()}))
-            self._rec.send_recording_name(recording_name or f"{application_id} {self.path.stem}")
-        except (OSError, RuntimeError, ValueError) as exc:
-            raise UserError(f"cannot write recording {self.path}: {exc}") from exc
-
-        self._thread = threading.Thread(target=self._run, name="rrd-recorder", daemon=True)
-        self._thread.start()
-        atexit.register(_close_ref, weakref.ref(self))
+        self._thread = threading.Thread(target=self._run, name=f"rrd-{label}", daemon=True)
+        self.stats = {"submitted": 0, "written": 0, "failed": 0, "dropped": 0}
 
     # -- the loop's side: O(1), no locks, no I/O -------------------------------------------------------
 
-    def submit(self, rec: SampleRecord) -> None:
-        """Queue one processed sample; it will be in the file after the next flush or ``close()``."""
-        self._queue(rec)
-
-    def submit_truth(self, rec: TruthRecord) -> None:
-        """Queue one ground-truth sample from the simulator (``uav/<sysid>/truth``)."""
-        self._queue(rec)
-
-    def _queue(self, rec: SampleRecord | TruthRecord) -> None:
-        if self._closed:
-            self._fail_once("closed", "record submitted after close() is not written")
-            return
-        if not self._pending:
+    def put(self, rec: SampleRecord | TruthRecord) -> None:
+        pending = self._pending
+        if not pending:
             self._oldest = time.monotonic()
-        self._pending.append(rec)
+        elif len(pending) == pending.maxlen:
+            self.stats["dropped"] += 1  # the deque drops its oldest record on this append
+        pending.append(rec)
         self.stats["submitted"] += 1
 
     # -- the writer's side ------------------------------------------------------------------------------
@@ -347,11 +342,10 @@ class RrdRecorder:
         self._write(samples, SAMPLE_SCALARS, SAMPLE_VECTORS, wall=True)
         self._write(truths, TRUTH_SCALARS, TRUTH_VECTORS, wall=False)
         self._update_blueprint(force=False)
-        # Rerun writes the file from its own thread and reports a failure (disk full) only on flush: flush
-        # here, in the writer thread, so that a failure is known within one batch, not at close
-        if self.error is None and not self._guard(f"writing {self.path} (disk full or file removed?)",
-                                                  lambda: self._rec.flush(timeout_sec=5.0)):
-            self.stats["failed"] += len(batch)
+        self._after_drain(len(batch))
+
+    def _after_drain(self, n: int) -> None:
+        """Hook: what a sink checks once a batch of ``n`` records went out."""
 
     def _write(self, records: list, scalars: dict[str, tuple[str, float]], vectors: dict[str, str],
                wall: bool) -> None:
@@ -389,36 +383,152 @@ class RrdRecorder:
             return False
 
     def _fail_once(self, kind: str, message: str) -> None:
-        if self.error is None:
-            self.error = f"{kind}: {message}"
         if kind not in self._failures:
             self._failures.add(kind)
             log.error("rrd recorder %s failed (%s); the loop goes on, see recorder stats", kind, message)
 
+
+class FileSink(StreamWriter):
+    """The ``.rrd`` file: lossless (unbounded queue), and a write failure is the run's ``error``."""
+
+    def __init__(self, path: Path, application_id: str, recording_id: str, properties: dict[str, str],
+                 recording_name: str, **policy: Any) -> None:
+        super().__init__(path.name, **policy)
+        self.path = path
+        self.error: str | None = None  # the first write failure, as one line (the daemon reports it)
+        if self.path.is_dir() or not self.path.parent.is_dir():
+            raise UserError(f"cannot write recording {self.path}: not a file in an existing directory")
+        try:
+            self._rec = open_stream(application_id, recording_id, properties, recording_name,
+                                    lambda rec: rec.save(str(self.path), default_blueprint=default_blueprint(())))
+        except (OSError, RuntimeError, ValueError) as exc:
+            raise UserError(f"cannot write recording {self.path}: {exc}") from exc
+        self._thread.start()
+
+    def _after_drain(self, n: int) -> None:
+        # Rerun writes the file from its own thread and reports a failure (disk full) only on flush: flush
+        # here, in the writer thread, so that a failure is known within one batch, not at close
+        if self.error is None and not self._guard(f"writing {self.path} (disk full or file removed?)",
+                                                  lambda: self._rec.flush(timeout_sec=5.0)):
+            self.stats["failed"] += n
+
+    def _fail_once(self, kind: str, message: str) -> None:
+        if self.error is None:
+            self.error = f"{kind}: {message}"
+        super()._fail_once(kind, message)
+
+    def close(self, timeout_s: float) -> None:
+        """Stop the writer, write what is left, the blueprint and the footer (in the calling thread)."""
+        self._stop.set()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout_s)
+        if self._thread.is_alive():
+            self._fail_once("close", f"writer thread still busy after {timeout_s} s")
+        self._drain()
+        self._update_blueprint(force=True)
+        self._guard("close", self._finish)
+
+    def _finish(self) -> None:
+        self._rec.flush()
+        self._rec.disconnect()  # drops the file sink: writes the footer
+
+
+class RrdRecorder:
+    """Buffered, never-raising fan-out of ``SampleRecord``/``TruthRecord`` to a ``.rrd`` file and live viewers.
+
+    Every sink gets every record and the blueprint through its own stream, queue and thread: the file
+    (``path``) is lossless; each live viewer (``live``: ``rerun+http://HOST:PORT/proxy`` URLs, see
+    ``monitor.service.live_sinks``) has a bounded queue, so a slow or vanished viewer costs its own
+    oldest records, never the file's rows nor the loop's time.
+
+    ``submit``/``submit_truth`` may be called from any thread (the loop, a Zenoh callback); ``close``
+    is idempotent and safe from a signal handler: it stops the writers, writes what is left, the
+    blueprint and the footer. It is also registered with ``atexit`` so a normal interpreter exit
+    leaves a complete file even when the caller forgets.
+    """
+
+    def __init__(self, path: str | Path | None, application_id: str = "fault-monitor",
+                 properties: dict[str, str] | None = None, *, batch_size: int = 256, max_age_s: float = 0.5,
+                 poll_s: float = 0.01, recording_name: str | None = None, live: Sequence[str] = ()) -> None:
+        import uuid
+
+        self.path = Path(path) if path is not None else None
+        props = {"layout": LAYOUT_VERSION, **software_versions(), **(properties or {})}
+        name = recording_name or f"{application_id} {self.path.stem if self.path else 'live'}"
+        recording_id = str(uuid.uuid4())
+        self._file = None if self.path is None else FileSink(
+            self.path, application_id, recording_id, props, name, batch_size=batch_size, max_age_s=max_age_s,
+            poll_s=poll_s)
+        self.live: list[LiveSink] = []
+        if live:
+            from monitor.service.live_sinks import LiveSink
+
+            self.live = [LiveSink(url, application_id, recording_id, props, name) for url in live]
+        self._sinks: tuple[StreamWriter, ...] = ((self._file,) if self._file else ()) + tuple(self.live)
+        self._closed = False
+        self._close_lock = threading.Lock()
+        atexit.register(_close_ref, weakref.ref(self))
+
+    @property
+    def error(self) -> str | None:
+        """The file's first write failure as one line, else ``None`` (live viewers only ever warn)."""
+        return self._file.error if self._file else None
+
+    @property
+    def stats(self) -> dict[str, int]:
+        """The file's counters (``submitted``, ``written``, ``failed``); live sinks keep their own."""
+        return self._file.stats if self._file else {"submitted": 0, "written": 0, "failed": 0, "dropped": 0}
+
+    @property
+    def _rec(self) -> Any:
+        return self._file._rec if self._file else None
+
+    # -- the loop's side: O(1) per sink, no locks, no I/O ------------------------------------------------
+
+    def submit(self, rec: SampleRecord) -> None:
+        """Queue one processed sample; it will be in the file after the next flush or ``close()``."""
+        self._queue(rec)
+
+    def submit_truth(self, rec: TruthRecord) -> None:
+        """Queue one ground-truth sample from the simulator (``uav/<sysid>/truth``)."""
+        self._queue(rec)
+
+    def _queue(self, rec: SampleRecord | TruthRecord) -> None:
+        if self._closed:
+            if self._file is not None:
+                self._file._fail_once("closed", "record submitted after close() is not written")
+            return
+        for sink in self._sinks:
+            sink.put(rec)
+
+    def _drain(self) -> None:
+        """Write the file's pending records now (the benchmark times the writer's step with it)."""
+        if self._file is not None:
+            self._file._drain()
+
     # -- shutdown -------------------------------------------------------------------------------------
 
-    def close(self, timeout_s: float = 10.0) -> None:
-        """Write everything submitted so far, the blueprint and the footer. Idempotent, never raises."""
+    def close(self, timeout_s: float = 10.0, live_timeout_s: float = 3.0) -> None:
+        """Write everything submitted so far to every sink. Idempotent, never raises.
+
+        The live sinks finish in their own threads while the file is closed here; a viewer that has not
+        taken the rest after ``live_timeout_s`` more is left behind (it must not hold up the exit).
+        """
         if not self._close_lock.acquire(blocking=False):
             return  # another thread (or an interrupted frame of this one) is closing already
         try:
             if self._closed:
                 return
             self._closed = True
-            self._stop.set()
-            if self._thread is not threading.current_thread():
-                self._thread.join(timeout_s)
-            if self._thread.is_alive():
-                self._fail_once("close", f"writer thread still busy after {timeout_s} s")
-            self._drain()
-            self._update_blueprint(force=True)
-            self._guard("close", self._finish)
+            for sink in self.live:
+                sink.close()
+            if self._file is not None:
+                self._file.close(timeout_s)
+            deadline = time.monotonic() + live_timeout_s
+            for sink in self.live:
+                sink.join(max(0.0, deadline - time.monotonic()))
         finally:
             self._close_lock.release()
-
-    def _finish(self) -> None:
-        self._rec.flush()
-        self._rec.disconnect()  # drops the file sink: writes the footer
 
     def __enter__(self) -> RrdRecorder:
         return self
