@@ -92,6 +92,13 @@ def register(subparsers) -> None:
                       "telemetry")
     out = p.add_argument_group("outputs and alarm")
     out.add_argument("--rrd", metavar="FILE", help="record every processed sample to this Rerun file")
+    out.add_argument("--rerun-url", action="append", default=None, metavar="URL",
+                     help="also stream every sample live to the Rerun viewer at this gRPC address, as the viewer "
+                     "prints it (rerun+http://127.0.0.1:9876/proxy). Repeatable. A viewer that is slow or away "
+                     "loses its own oldest samples, never the loop's time nor --rrd's rows")
+    out.add_argument("--rerun-spawn", action="store_true",
+                     help="start a local Rerun viewer (the 'rerun' executable, port 9876 on loopback; or use the one "
+                     "already there) and stream to it as --rerun-url does")
     out.add_argument("--name", help="monitor name in the liveliness key <prefix>/monitor/<name> (default: host-pid)")
     out.add_argument("--no-truth", dest="truth", action="store_false",
                      help="do not subscribe to <prefix>/*/truth (the simulator's ground truth, recorded beside f_hat)")
@@ -115,6 +122,16 @@ def _free_tcp_port() -> int:
         return s.getsockname()[1]
 
 
+def _live_viewers(args: argparse.Namespace) -> tuple[list[str], str | None]:
+    """``--rerun-url`` checked and ``--rerun-spawn``'s executable found now: a typo is exit 2, not a silent sink."""
+    from monitor.service.live_sinks import find_viewer, parse_viewer_url
+
+    urls = list(args.rerun_url or [])
+    for url in urls:
+        parse_viewer_url(url)
+    return urls, find_viewer() if args.rerun_spawn else None
+
+
 def run(args: argparse.Namespace) -> int:
     from monitor import __version__
     from monitor.errors import UserError
@@ -130,6 +147,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0 <= args.assembly_wait < 10:
         raise UserError("--assembly-wait must be between 0 and 10 seconds")
     connections = [parse_connection(c) for c in (args.mavlink or ["udpin:127.0.0.1:14550"])]
+    live_urls, viewer = _live_viewers(args)
     fleet = load_models(args)
     key = None
     if args.signing_key:
@@ -154,5 +172,6 @@ def run(args: argparse.Namespace) -> int:
                            name=args.name or default_name(), rrd=args.rrd, rrd_properties=properties,
                            signing_key=key, alarm=alarm, vehicle_timeout=args.vehicle_timeout, truth=args.truth,
                            queue_max=args.queue, observe=args.observe, gcs_feedback=args.gcs_feedback,
-                           assembly_wait=args.assembly_wait, zenoh_endpoints=endpoints)
+                           assembly_wait=args.assembly_wait, zenoh_endpoints=endpoints, live_urls=live_urls,
+                           spawn_viewer=viewer)
     return run_daemon(config, config_from_args(args))

@@ -6,7 +6,7 @@ processed, and once a second the housekeeping: heartbeats on every link, vehicle
 for a vehicle whose telemetry never becomes a sample.
 
 Shutdown (SIGINT/SIGTERM): stop reading, log the summary, drain the Zenoh queue (bounded), close the
-recorder (which flushes and writes the footer), undeclare everything and close the session (bounded),
+recorder (which flushes and writes the footer; live viewers get a bounded wait), undeclare everything and close the session (bounded),
 exit 0. A second signal during shutdown is ignored rather than leaving a half-written recording.
 """
 
@@ -61,6 +61,8 @@ class MonitorConfig:
     assembly_wait: float = 0.02
     zenoh_endpoints: str = ""
     poll_s: float = 0.005
+    live_urls: list[str] = field(default_factory=list)  # live Rerun viewers' gRPC addresses (--rerun-url)
+    spawn_viewer: str | None = None  # the `rerun` executable to start a local viewer with (--rerun-spawn)
 
 
 def build_pipeline(config: MonitorConfig, publisher=None, recorder=None) -> Pipeline:
@@ -86,6 +88,23 @@ def _check_recorder(pipeline: Pipeline) -> None:
         publisher.status_extra["recording_error"] = recorder.error
 
 
+def _recording_outputs(config: MonitorConfig) -> str:
+    """The ready line's tail: where the samples go besides Zenoh (a file, live viewers)."""
+    out = f", recording {config.rrd}" if config.rrd else ""
+    return out + "".join(f", live viewer {url}" for url in config.live_urls)
+
+
+def _live_urls(config: MonitorConfig) -> list[str]:
+    """``--rerun-url`` addresses plus the spawned viewer's (started here, before the loop), each once."""
+    urls = list(dict.fromkeys(config.live_urls))
+    if config.spawn_viewer:
+        from monitor.service.live_sinks import spawn_viewer
+
+        url = spawn_viewer(config.spawn_viewer)
+        urls += [url] if url not in urls else []
+    return urls
+
+
 async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
@@ -101,7 +120,7 @@ async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
         mode = "observe-only" if config.observe else "closed loop"
         log.info("ready: %s; MAVLink %s; Zenoh %s, key prefix '%s', name '%s'%s", mode,
                  ", ".join(link.local for link in links), config.zenoh_endpoints or "(config file)", config.prefix,
-                 config.name, f", recording {config.rrd}" if config.rrd else "")
+                 config.name, _recording_outputs(config))
         for link in links:
             link.heartbeat()
         next_housekeeping = time.monotonic() + 1.0
@@ -135,10 +154,11 @@ def run_daemon(config: MonitorConfig, zenoh_config) -> int:
     session = open_session(zenoh_config)
     publisher = truth_sub = recorder = None
     try:
-        if config.rrd:
+        config.live_urls = _live_urls(config)
+        if config.rrd or config.live_urls:
             from monitor.service.recorder import RrdRecorder
 
-            recorder = RrdRecorder(config.rrd, properties=config.rrd_properties)
+            recorder = RrdRecorder(config.rrd, properties=config.rrd_properties, live=config.live_urls)
         units = {m.plant.unit for m in config.fleet.models()}
         publisher = EstimatePublisher(session, config.prefix, config.name, unit=next(iter(units), "deg"),
                                       queue_max=config.queue_max)

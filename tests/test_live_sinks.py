@@ -1,0 +1,97 @@
+"""A live viewer's sink: addresses checked up front, a bounded queue that keeps the newest samples, one WARNING.
+
+Real parts only: a port where nothing listens, and a headless ``rerun --save`` viewer started late.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from monitor.errors import UserError
+from monitor.service.live_sinks import LiveSink, find_viewer, parse_viewer_url
+from tests.daemons import free_tcp_port, wait_for
+from tests.test_recorder import make_run
+
+
+def _sink(port: int, **kwargs: object) -> LiveSink:
+    return LiveSink(f"rerun+http://127.0.0.1:{port}/proxy", "fault-monitor", "test-recording", {"layout": "1"},
+                    "live test", **kwargs)
+
+
+def test_viewer_addresses_are_checked() -> None:
+    assert parse_viewer_url("rerun+http://127.0.0.1:9876/proxy") == ("127.0.0.1", 9876)
+    assert parse_viewer_url("rerun+https://[::1]:443/proxy/") == ("::1", 443)
+    for bad in ("http://127.0.0.1:9876/proxy", "rerun://127.0.0.1:9876/proxy", "rerun+http://127.0.0.1/proxy",
+                "rerun+http://127.0.0.1:9876/", "rerun+http://127.0.0.1:99999/proxy", "rerun+http://:9876/proxy",
+                "127.0.0.1:9876"):
+        with pytest.raises(UserError, match="--rerun-url"):
+            parse_viewer_url(bad)
+
+
+def test_the_viewer_executable_is_found_or_a_user_error(tmp_path: Path) -> None:
+    with pytest.raises(UserError, match="--rerun-spawn"):
+        find_viewer(search_path=str(tmp_path))
+    assert Path(find_viewer(search_path=str(Path(sys.executable).parent))).name == "rerun"
+
+
+def test_nobody_listening_keeps_the_newest_samples_and_warns_once(caplog: pytest.LogCaptureFixture) -> None:
+    samples, _ = make_run(1, n=250)
+    with caplog.at_level(logging.INFO, logger="monitor.service.live_sinks"):
+        sink = _sink(free_tcp_port(), maxlen=100, probe_s=0.05)
+        worst = 0.0
+        for s in samples:
+            t0 = time.perf_counter()
+            sink.put(s)
+            worst = max(worst, time.perf_counter() - t0)
+        time.sleep(0.3)  # a few probes: still one WARNING
+        assert [r.k for r in sink._pending] == list(range(150, 250))
+        assert sink.stats["dropped"] == 150 and sink.stats["written"] == 0 and not sink.connected
+        t0 = time.monotonic()
+        sink.close()
+        sink.join(2.0)
+        assert time.monotonic() - t0 < 1.0, "closing a sink that never connected must not wait on Rerun"
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 1 and "nothing answers" in warnings[0], warnings
+    assert worst < 0.005, f"put took {worst * 1e6:.0f} us"
+
+
+def test_a_viewer_started_late_gets_the_kept_samples(tmp_path: Path) -> None:
+    from tests.e2e.test_live_viewer import _load_when_complete, headless_viewer
+
+    port, out = free_tcp_port(), tmp_path / "late.rrd"
+    samples, _ = make_run(1, n=80)
+    sink = _sink(port, maxlen=50, probe_s=0.1)
+    try:
+        for s in samples:
+            sink.put(s)
+        with headless_viewer(tmp_path, port, out):
+            wait_for(lambda: sink.connected, 5, what="the sink connecting")
+            wait_for(lambda: sink.stats["written"] == 50, 5, what="the kept samples sent")
+            sink.close()
+            sink.join(5.0)
+            got = _load_when_complete(out, 50)
+    finally:
+        sink.close()
+    assert [s.k for s in got.vehicles[1].samples] == list(range(30, 80))
+    assert sink.stats["dropped"] == 30 and sink.connections == 1
+
+
+def test_a_recorder_with_only_a_live_viewer_never_waits_for_it() -> None:
+    """No ``--rrd``: the recorder still takes every sample at once and closes at once; no file error."""
+    from monitor.service.recorder import RrdRecorder
+
+    samples, truth = make_run(2, n=300)
+    rec = RrdRecorder(None, live=[f"rerun+http://127.0.0.1:{free_tcp_port()}/proxy"])
+    t0 = time.monotonic()
+    for s, t in zip(samples, truth):
+        rec.submit(s)
+        rec.submit_truth(t)
+    rec.close()
+    assert time.monotonic() - t0 < 1.0
+    [sink] = rec.live
+    assert rec.error is None and rec.path is None and sink.stats["submitted"] == 600 and sink.stats["dropped"] == 0
