@@ -95,3 +95,32 @@ def test_a_recorder_with_only_a_live_viewer_never_waits_for_it() -> None:
     assert time.monotonic() - t0 < 1.0
     [sink] = rec.live
     assert rec.error is None and rec.path is None and sink.stats["submitted"] == 600 and sink.stats["dropped"] == 0
+
+
+def test_a_spawned_viewer_is_waited_for_and_reused(tmp_path: Path) -> None:
+    """``spawn_viewer`` returns once the viewer listens; a second call finds it and starts no other.
+
+    The viewer here is the real binary made headless (``--save``) by a wrapper script that notes its pid,
+    since this machine has no display for the window ``--rerun-spawn`` normally opens.
+    """
+    import os
+    import signal
+
+    from monitor.service.live_sinks import spawn_viewer, viewer_answers
+    from tests.e2e.test_live_viewer import _viewer_binary
+
+    port, pid_file = free_tcp_port(), tmp_path / "viewer.pid"
+    script = tmp_path / "rerun"
+    script.write_text(f'#!/bin/sh\necho $$ >> "{pid_file}"\nexec "{_viewer_binary()}" "$@" --save "{tmp_path}/s.rrd"\n')
+    script.chmod(0o755)
+    try:
+        url = spawn_viewer(str(script), port)
+        assert url == f"rerun+http://127.0.0.1:{port}/proxy" and viewer_answers("127.0.0.1", port)
+        assert spawn_viewer(str(script), port) == url
+        assert len(pid_file.read_text().split()) == 1, "a second viewer was started"
+    finally:
+        for pid in pid_file.read_text().split() if pid_file.exists() else []:
+            try:
+                os.killpg(int(pid), signal.SIGTERM)  # its own session: the group is the viewer
+            except ProcessLookupError:
+                pass
