@@ -18,7 +18,8 @@ True
 
 Plants can come from arrays (``plant_from_arrays``) or from a python-control ``StateSpace``
 (``plant_from_statespace``; python-control is not a dependency), gains from a file (``read_gains``), and a
-recording written by ``run``, ``analyse`` or ``simulate(..., rrd=...)`` is read back with ``read_recording``.
+recording written by ``run``, ``analyse`` or ``demo`` is read back with ``read_recording`` (rows) or
+``report`` (the scores ``replay`` prints).
 """
 
 from __future__ import annotations

@@ -12,6 +12,7 @@ import json
 import re
 import signal
 import threading
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
@@ -31,14 +32,16 @@ SLACK = 4  # "within a few samples of the limit"
 
 @pytest.fixture(scope="session")
 def gains_file(tmp_path_factory) -> Path:
-    """A certified design for paper-continuous, computed once per test session (~4 s)."""
-    from monitor.design.certified import design_certified
+    """The default certified design for paper-continuous (what `fault-monitor design` writes), once per session."""
+    from monitor.design import run_design
     from monitor.gains import write_gains
     from monitor.plant import load_plant
 
     plant = load_plant("paper-continuous")
     path = tmp_path_factory.mktemp("gains") / "certified.toml"
-    write_gains(path, design_certified(plant), plant)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        write_gains(path, run_design("certified", plant), plant)
     return path
 
 
