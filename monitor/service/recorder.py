@@ -452,6 +452,11 @@ class RrdRecorder:
                  poll_s: float = 0.01, recording_name: str | None = None, live: Sequence[str] = ()) -> None:
         import uuid
 
+        if live:  # every address checked before the file sink's thread starts
+            from monitor.service.live_sinks import LiveSink, parse_viewer_url
+
+            for url in live:
+                parse_viewer_url(url)
         self.path = Path(path) if path is not None else None
         props = {"layout": LAYOUT_VERSION, **software_versions(), **(properties or {})}
         name = recording_name or f"{application_id} {self.path.stem if self.path else 'live'}"
@@ -461,8 +466,6 @@ class RrdRecorder:
             poll_s=poll_s)
         self.live: list[LiveSink] = []
         if live:
-            from monitor.service.live_sinks import LiveSink
-
             self.live = [LiveSink(url, application_id, recording_id, props, name) for url in live]
         self._sinks: tuple[StreamWriter, ...] = ((self._file,) if self._file else ()) + tuple(self.live)
         self._closed = False

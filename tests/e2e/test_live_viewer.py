@@ -112,7 +112,7 @@ def test_a_viewer_that_dies_or_never_answers_costs_neither_the_loop_nor_the_file
     command, the file every sample, the monitor exits 0 promptly (``wait(10)``) with one WARNING per viewer."""
     port, vport = free_udp_port(), free_tcp_port()
     url, nobody = f"rerun+http://127.0.0.1:{vport}/proxy", f"rerun+http://127.0.0.1:{free_tcp_port()}/proxy"
-    steps, rrd, summary = 120, tmp_path / "file.rrd", tmp_path / "sim.json"
+    steps, rrd, summary = 90, tmp_path / "file.rrd", tmp_path / "sim.json"
     with zenoh_bus() as bus, headless_viewer(tmp_path, vport, tmp_path / "viewer.rrd") as viewer:
         estimates = bus.collect("uav/*/fault/estimate")
         with monitor_daemon(tmp_path, gains_file, port, bus, "lossy", "--rrd", str(rrd), "--rerun-url", url,
@@ -149,8 +149,7 @@ def test_a_bad_viewer_address_is_one_line_and_exit_2(tmp_path: Path, gains_file:
     config = tmp_path / "monitor.toml"  # run --config maps the long flag names: rerun_url is --rerun-url
     config.write_text(f'plant = "paper-continuous"\ngains = "{gains_file}"\nrerun_url = ["rerun+http://127.0.0.1"]\n')
     common = ["run", "--plant", "paper-continuous", "--gains", str(gains_file), "--rerun-url"]
-    for argv in ([*common, "http://127.0.0.1:9876/proxy"], [*common, "rerun+http://127.0.0.1/proxy"],
-                 [*common, "rerun+http://127.0.0.1:9876/x"], ["run", "--config", str(config)]):
+    for argv in ([*common, "http://127.0.0.1:9876/proxy"], ["run", "--config", str(config)]):  # more: unit tests
         out = subprocess.run([sys.executable, "-m", "monitor", *argv], capture_output=True, text=True, timeout=30,
                              check=False)
         assert out.returncode == 2, out.stderr
