@@ -13,20 +13,7 @@ from monitor.design.paper import lemma3_K2_K3
 from monitor.errors import DesignFailed
 from monitor.plant import load_plant, parse_plant
 from monitor.verify import verify_gains
-
-_cache: dict = {}
-
-
-def designed(preset: str, method: str, objective: str | None = None):
-    key = (preset, method, objective)
-    if key not in _cache:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            plant = load_plant(preset)
-            options = {"objective": objective} if objective else {}
-            _cache[key] = (plant, run_design(method, plant, **options))
-    return _cache[key]
-
+from tests.designs import designed
 
 @pytest.mark.parametrize("preset", ["paper", "paper-continuous"])
 @pytest.mark.parametrize("objective, gamma_max, rho_bound", [("hinf", 2.0, 0.8), ("fast", 2.4, 0.85)])

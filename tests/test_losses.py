@@ -6,32 +6,22 @@ import json
 import subprocess
 import sys
 import tomllib
-import warnings
 
 import numpy as np
 import pytest
 
 from monitor.closed_loop import Gains, closed_loop, steady_state
 from monitor.delay_model import b0_of_tau, b0_polytope, input_sum
-from monitor.design import run_design
 from monitor.estimator import Estimator
 from monitor.loss_model import loss_modes, macro_steps
 from monitor.plant import load_plant
 from monitor.verify_losses import contraction, verify_losses
+from tests.designs import designed
 
 DELIVERED, COMMAND_LOST, SAMPLE_LOST = "delivered", "command", "sample"
 
-_designs: dict = {}
-
-
 def design(objective: str, max_losses: int = 0):
-    key = (objective, max_losses)
-    if key not in _designs:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            plant = load_plant("paper-continuous")
-            _designs[key] = (plant, run_design("certified", plant, objective=objective, max_losses=max_losses))
-    return _designs[key]
+    return designed("paper-continuous", "certified", objective, max_losses)
 
 
 def simulate(plant, gains: Gains, events: list[str], taus: np.ndarray, fault: float, x0: np.ndarray):
@@ -159,9 +149,9 @@ def test_cli_design_and_verify_with_max_losses(tmp_path):
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
     assert out["losses"]["stable"] is True and out["stable_with_losses"] is True
-    hinf = tmp_path / "hinf.toml"
-    proc = fm("design", "--plant", "paper-continuous", "--objective", "hinf", "--max-losses", "1", "--out", str(hinf))
-    assert proc.returncode != 0 and not hinf.exists()
+    separate = tmp_path / "separate.toml"  # unstable even without losses: no loss certificate can exist
+    proc = fm("design", "--plant", "paper-continuous", "--method", "separate", "--max-losses", "1", "--out", str(separate))
+    assert proc.returncode != 0 and not separate.exists()
     assert "consecutive" in proc.stderr and "Traceback" not in proc.stderr
     proc = fm("verify", "--plant", "paper-continuous", "--gains", str(gains), "--max-losses", "-1")
     assert proc.returncode == 2 and "--max-losses" in proc.stderr
