@@ -111,12 +111,27 @@ def test_analyse_command_report_json_and_rrd(tmp_path: Path, gains: Path) -> Non
     assert again["samples"] == STEPS and again["rms_ef"] == pytest.approx(report["rms_ef"])
 
 
+def test_analyse_with_the_proven_alarm_threshold(tmp_path: Path, gains: Path) -> None:
+    """--alarm-threshold auto: far below the default 1.0, yet the wind alone never trips it; the fault does."""
+    tlog = tmp_path / "flight.tlog"
+    _write_flight(tlog, load_plant("paper-continuous"), garbage=False)
+    out = subprocess.run([sys.executable, "-m", "monitor", "analyse", str(tlog), "--plant", "paper-continuous",
+                          "--gains", str(gains), "--json", "--fault", f"bias:2@{ONSET + 5}", "--alarm-threshold", "auto",
+                          "--disturbance-bound", "0.002", "--log-level", "info"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    report = json.loads(out.stdout)
+    assert report["false_alarms"] == 0 and report["detection_steps"] is not None
+    assert "alarm threshold auto" in out.stderr
+
+
 @pytest.mark.parametrize("args, message", [
     (["missing.tlog"], "no such log file"),
     (["{tlog}", "--sysid", "300"], "--sysid must be"),
     (["{tlog}", "--sysid", "7"], "no sample could be assembled"),
     (["{tlog}", "--fault", "bias:x@1"], "bias"),
     (["{tlog}", "--signals", "{bad}"], "unknown MAVLink message 'NOPE'"),
+    (["{tlog}", "--alarm-threshold", "auto"], "needs --disturbance-bound"),
 ])
 def test_analyse_bad_input_is_one_line_exit_2(tmp_path: Path, gains: Path, args: list[str], message: str) -> None:
     tlog = tmp_path / "flight.tlog"

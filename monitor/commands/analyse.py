@@ -50,8 +50,8 @@ def run(args: argparse.Namespace) -> int:
         parse_fault_spec(args.fault)  # a bad SPEC is a one-line error before the work starts
     if not Path(args.tlog).is_file():
         raise UserError(f"{args.tlog}: no such log file")
-    alarm = alarm_from_args(args)
     fleet = load_models(args)
+    alarm = alarm_from_args(args, fleet)
     model = fleet.default
     properties = {"monitor_version": __version__, "mode": "observe (analyse)", "source_log": str(args.tlog),
                   "plant": model.plant.name, "plant_hash": model.plant.digest, "gains": str(args.gains),

@@ -37,23 +37,63 @@ def load_models(args: argparse.Namespace):
     return load_fleet(fleet_file, default, args.force) if fleet_file else Fleet(default)
 
 
+AUTO_MARGIN = 1.25  # --alarm-threshold auto: raise at 1.25 x the proven no-fault bound on |f_hat|
+
+
+def _threshold_value(text: str) -> float | str:
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number or 'auto', got {text!r}") from None
+
+
 def add_alarm_arguments(group) -> None:
     """The alarm's hysteresis flags (shared with ``analyse``, so a log is scored as the live run was)."""
-    group.add_argument("--alarm-threshold", type=float, default=1.0, metavar="X",
-                       help="raise when max |f_hat| >= X (plant units) for --alarm-samples samples in a row "
-                       "(default: 1.0)")
-    group.add_argument("--alarm-clear", type=float, default=0.5, metavar="Y",
-                       help="clear when max |f_hat| < Y for --alarm-samples samples in a row (default: 0.5)")
+    group.add_argument("--alarm-threshold", type=_threshold_value, default=1.0, metavar="X",
+                       help="raise when max |f_hat| >= X (plant units) for --alarm-samples samples in a row; "
+                            f"'auto': {AUTO_MARGIN} x the proven bound on |f_hat| with no fault and |d| <= "
+                            "--disturbance-bound (fault-monitor threshold), so wind alone cannot raise it "
+                            "(default: 1.0)")
+    group.add_argument("--disturbance-bound", type=float, default=None, metavar="D",
+                       help="with --alarm-threshold auto: the largest |d(k)| the vehicle meets (plant units)")
+    group.add_argument("--alarm-clear", type=float, default=None, metavar="Y",
+                       help="clear when max |f_hat| < Y for --alarm-samples samples in a row "
+                            "(default: half the threshold)")
     group.add_argument("--alarm-samples", type=int, default=2, metavar="N",
                        help="persistence of raise and clear (default: 2)")
 
 
-def alarm_from_args(args: argparse.Namespace):
+def alarm_from_args(args: argparse.Namespace, fleet=None):
+    """The alarm configuration; ``auto`` needs the fleet's models (the bound of the worst one is used)."""
+    import logging
+
     from monitor.errors import UserError
     from monitor.service.alarm import AlarmConfig
 
+    threshold = args.alarm_threshold
+    if threshold == "auto":
+        if args.disturbance_bound is None:
+            raise UserError("--alarm-threshold auto needs --disturbance-bound D (the largest |d| to tolerate)")
+        from monitor.threshold import fault_threshold
+
+        bounds = [fault_threshold(m.plant, m.gains.gains, args.disturbance_bound) for m in (fleet.models() if fleet else [])]
+        if not bounds:
+            raise UserError("--alarm-threshold auto needs the vehicles' plant and gains")
+        worst = max(bounds, key=lambda b: b.threshold)
+        threshold = AUTO_MARGIN * worst.threshold
+        if not threshold > 0:
+            raise UserError("--alarm-threshold auto: the proven bound is 0 (no disturbance reaches f_hat); give X")
+        logging.getLogger("monitor.alarm").info(
+            "alarm threshold auto: %.4g = %.2f x the proven bound %.4g on |f_hat| with no fault and |d| <= %g "
+            "(the l1 norm at the worst constant delay is %.4g)", threshold, AUTO_MARGIN, worst.threshold,
+            args.disturbance_bound, worst.frozen_l1 * args.disturbance_bound)
+    elif args.disturbance_bound is not None:
+        raise UserError("--disturbance-bound applies to --alarm-threshold auto only")
+    clear = args.alarm_clear if args.alarm_clear is not None else 0.5 * threshold
     try:
-        return AlarmConfig(args.alarm_threshold, args.alarm_clear, args.alarm_samples)
+        return AlarmConfig(threshold, clear, args.alarm_samples)
     except ValueError as exc:
         raise UserError(str(exc)) from None
 
@@ -139,7 +179,6 @@ def run(args: argparse.Namespace) -> int:
     from monitor.service.daemon import MonitorConfig, default_name, run_daemon
     from monitor.wire.zenoh_session import config_from_args
 
-    alarm = alarm_from_args(args)
     if not args.vehicle_timeout > 0:
         raise UserError("--vehicle-timeout must be positive")
     if args.queue < 1:
@@ -149,6 +188,7 @@ def run(args: argparse.Namespace) -> int:
     connections = [parse_connection(c) for c in (args.mavlink or ["udpin:127.0.0.1:14550"])]
     live_urls, viewer = _live_viewers(args)
     fleet = load_models(args)
+    alarm = alarm_from_args(args, fleet)
     key = None
     if args.signing_key:
         from monitor.wire.signing_key import load_signing_key  # one key-file format for both ends
