@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-METHODS = ("certified", "paper", "separate")
+METHODS = ("certified", "robust-separate", "paper", "separate")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -12,12 +12,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "demo",
         help="the paper's scenario end to end: design, run live daemons per design, compare, write figures",
         description=(
-            "Design (or load cached) certified, paper-repaired and separate gains for the plant; for each design in\n"
+            "Design (or load cached) certified, robust-separate, paper-repaired and separate gains for the plant; for\n"
+            "each design in\n"
             "turn start sim-vehicle and fault-monitor run as real daemons on free loopback ports with the same\n"
             "scenario and seed, subscribe to the estimates over Zenoh, then print a comparison table and write\n"
             "DIR/<design>.rrd (open with `rerun FILE.rrd`, score with `fault-monitor replay FILE.rrd`), DIR/*.png\n"
-            "(the paper's Figs. 3-5) and DIR/summary.json. With --runs N: Monte-Carlo over N delay seeds instead,\n"
-            "simulation only (no network)."
+            "(the paper's Figs. 3-5), DIR/summary.json and the daemons' logs in DIR/logs/. With --runs N: Monte-Carlo\n"
+            "over N delay seeds instead, simulation only (no network, same actuator limit), written to\n"
+            "DIR/montecarlo.json (the live run's summary.json is left alone)."
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -123,7 +123,7 @@ def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progre
     t0 = time.monotonic()
     try:
         name = f"demo-{method}-{os.getpid()}"
-        monitor = _Daemon("monitor", ["--log-level", "WARNING", "run", "--plant", scenario.plant, "--gains", str(gains),
+        monitor = _Daemon("monitor", ["--log-level", "INFO", "run", "--plant", scenario.plant, "--gains", str(gains),
                                       "--mavlink", f"udpin:127.0.0.1:{uport}", "--zenoh-connect", endpoint, "--zenoh-mode", "client",
                                       "--rrd", str(run.rrd), "--name", name], run.log_dir / f"{method}-monitor.log")
         token = f"uav/monitor/{name}"
@@ -134,7 +134,7 @@ def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progre
                                       "--sysid", str(scenario.sysid), "--steps", str(scenario.steps),
                                       "--speedup", str(scenario.speedup), "--fault", scenario.fault,
                                       "--delay", scenario.delay, "--wind", scenario.wind, "--seed", str(scenario.seed),
-                                      "--zenoh-connect", endpoint, "--zenoh-mode", "client", "--log-level", "WARNING"],
+                                      "--zenoh-connect", endpoint, "--zenoh-mode", "client", "--log-level", "INFO"],
                       run.log_dir / f"{method}-sim.log")
         budget = scenario.steps / scenario.speedup + 30.0
         deadline = time.monotonic() + budget

@@ -83,8 +83,8 @@ def _fmt(value, spec: str = ".3f", none: str = "never") -> str:
 
 def format_table(rows: list[Row]) -> str:
     head = ["design", "real loop", "certificate", "gamma_e", "gamma_z", "samples",
-            f"FE settling (limit {SETTLING_LIMIT})", "RMS e_f after onset", "peak |alpha| after", "RMS alpha after",
-            "alarm delay", "false alarms"]
+            f"FE settling, samples (floor {SETTLING_LIMIT})", "RMS e_f after onset", "peak |alpha| after, deg", "RMS alpha after, deg",
+            "alarm delay, samples", "false alarms"]
     body = [[r.method, "stable" if r.stable else "UNSTABLE", r.certificate, _fmt(r.gamma_e), _fmt(r.gamma_z),
              str(r.samples), _fmt(r.settling_steps, "d"), _fmt(r.rms_ef, ".3g"), _fmt(r.peak_alpha_after, ".3g"),
              _fmt(r.rms_alpha_after, ".3g"), _fmt(r.alarm_delay, "d"), str(r.false_alarms)] for r in rows]
