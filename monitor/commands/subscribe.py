@@ -15,12 +15,11 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "subscribe", help="print live fault estimates from Zenoh as JSON lines",
         description="Print every sample on KEYEXPR as one JSON line on stdout until SIGINT/SIGTERM, --count or "
-                    "--duration. Connect to a monitor (peer) or a router with --zenoh-connect.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                    "--duration. Connect to a monitor (peer) or a router with --zenoh-connect.")
     p.add_argument("keyexpr", nargs="?", default=None, metavar="KEYEXPR",
                    help="key expression (default: <prefix>/*/fault/estimate)")
-    p.add_argument("--count", type=int, metavar="N", help="exit after N samples")
-    p.add_argument("--duration", type=float, metavar="S", help="exit after S seconds")
+    p.add_argument("--count", type=int, metavar="N", help="exit after N samples (default: until a signal)")
+    p.add_argument("--duration", type=float, metavar="S", help="exit after S seconds (default: until a signal)")
     from monitor.wire.zenoh_session import add_zenoh_arguments
 
     add_zenoh_arguments(p)
