@@ -58,7 +58,7 @@ def test_keys_take_either_spelling_switches_and_lists():
 
 @pytest.mark.parametrize("raw, message", [
     ({"dealy": "const:0.1"}, "unknown key 'dealy'"),
-    ({"alarm_threshold": "high"}, "key 'alarm_threshold': expected a number, got 'high'"),
+    ({"alarm_threshold": "high"}, "key 'alarm_threshold': expected a number or 'auto', got 'high'"),
     ({"alarm_samples": 2.5}, "key 'alarm_samples': expected an integer"),
     ({"observe": "yes"}, "key 'observe': expected true or false"),
     ({"mavlink": [1]}, None),  # a number where a string is expected is taken as its text (then validated by run)
