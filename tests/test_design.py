@@ -15,8 +15,10 @@ from monitor.plant import load_plant, parse_plant
 from monitor.verify import verify_gains
 from tests.designs import designed
 
-@pytest.mark.parametrize("preset", ["paper", "paper-continuous"])
-@pytest.mark.parametrize("objective, gamma_max, rho_bound", [("hinf", 2.0, 0.8), ("fast", 2.4, 0.85)])
+@pytest.mark.parametrize("preset, objective, gamma_max, rho_bound", [
+    ("paper", "fast", 2.4, 0.85), ("paper-continuous", "fast", 2.4, 0.85),
+    ("paper-continuous", "hinf", 2.0, 0.8),  # ~3 s a design: one preset is enough (the benchmark runs both)
+])
 def test_certified_design_is_certified_stable_and_meets_its_bound(preset, objective, gamma_max, rho_bound):
     plant, result = designed(preset, "certified", objective)
     assert result.objective == objective
