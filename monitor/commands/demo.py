@@ -4,22 +4,22 @@ from __future__ import annotations
 
 import argparse
 
-METHODS = ("certified", "robust-separate", "paper", "separate")
+from monitor.demo.methods import METHODS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "demo",
-        help="the paper's scenario end to end: design, run live daemons per design, compare, write figures",
+        help="start here: the paper's scenario end to end (design, fly each design live, compare, figures)",
         description=(
-            "Design (or load cached) certified, robust-separate, paper-repaired and separate gains for the plant; for\n"
-            "each design in\n"
-            "turn start sim-vehicle and fault-monitor run as real daemons on free loopback ports with the same\n"
-            "scenario and seed, subscribe to the estimates over Zenoh, then print a comparison table and write\n"
-            "DIR/<design>.rrd (open with `rerun FILE.rrd`, score with `fault-monitor replay FILE.rrd`), DIR/*.png\n"
-            "(the paper's Figs. 3-5), DIR/summary.json and the daemons' logs in DIR/logs/. With --runs N: Monte-Carlo\n"
-            "over N delay seeds instead, simulation only (no network, same actuator limit), written to\n"
-            "DIR/montecarlo.json (the live run's summary.json is left alone)."
+            "Run the paper's comparison end to end. Design (or load cached) gains for each design in --methods,\n"
+            "check each with `verify`, then for each in turn start sim-vehicle and fault-monitor run as real\n"
+            "daemons on free loopback ports with the same scenario and seed, subscribe to the estimates over\n"
+            "Zenoh, and print a comparison table. Writes DIR/<design>.rrd (open with `rerun FILE.rrd`, score with\n"
+            "`fault-monitor replay FILE.rrd`), DIR/*.png (the paper's Figs. 3-5), DIR/summary.json and the\n"
+            "daemons' INFO logs in DIR/logs/. With --runs N: a Monte-Carlo over N delay seeds instead, simulation\n"
+            "only (no network, the live vehicle's actuator limit), written to DIR/montecarlo.json; the live run's\n"
+            "summary.json is left alone."
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -33,8 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed shared by every design's run (default: 0)")
     parser.add_argument("--methods", default=",".join(METHODS), metavar="LIST",
                         help=f"designs to compare, comma-separated (default: {','.join(METHODS)})")
-    parser.add_argument("--runs", type=int, metavar="N", help="Monte-Carlo over N delay seeds, simulation only (no daemons)")
-    parser.add_argument("--redesign", action="store_true", help="ignore cached gains in DIR/gains/")
+    parser.add_argument("--runs", type=int, metavar="N", help="instead of the live run: Monte-Carlo over N delay seeds, simulation only (no "
+                        "daemons), results in DIR/montecarlo.json")
+    parser.add_argument("--redesign", action="store_true", help="design again even when DIR/gains/ holds current gains")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     parser.set_defaults(func=run)
 

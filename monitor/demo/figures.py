@@ -2,30 +2,36 @@
 
 Why axis limits from the stable designs only: a design whose loop is unstable (it diverges, or oscillates
 at the actuator limit) would otherwise squash every other curve to a flat line; its curve is still drawn,
-clipped, and its legend entry says so.
+clipped, and its legend entry says so. Why the legend sits outside the axes and every design has its own
+line style and staggered markers: after the fault is compensated several designs lie on the same value,
+and a legend box or a solid line on top would hide a trace (the certified one was hidden from k = 62).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from monitor.demo.methods import look
 from monitor.demo.montecarlo import Trace
 
-__all__ = ["write_figures", "Q_OFFSET_NOTE"]
+__all__ = ["Panel", "write_figures"]
 
-# Why q does not return to 0 (README, Fig. 5): with a constant fault f, K3 cancels it in the measured output
-# alpha only (C = [1 0]); the steady state x = S_x f, u = S_u f is then fixed by the plant alone, the same for
-# every such design: on paper-continuous, f = 2 deg gives u = -0.880 deg and q = -0.579 deg/s
-# (monitor.closed_loop.steady_state). The short-period model has no attitude state to make q return to 0.
-Q_OFFSET_NOTE = ("Why q settles off zero: K3 cancels the fault in the measured alpha only (C = [1 0]). Holding alpha = 0 "
-                 "against a 2 deg bias takes\nu = -0.88 deg, and the short-period equations then leave q = -0.58 deg/s "
-                 "(steady state of the plant: the same for every design whose K3\ncancels the fault; the paper's "
-                 "Lemma-3 K3 does not, so its alpha and q settle elsewhere). q is not measured, so not regulated.")
 
-COLOURS = {"certified": "tab:blue", "robust-separate": "tab:green", "paper": "tab:orange", "separate": "tab:red"}
-STYLES = {"certified": "-", "robust-separate": "--", "paper": "-.", "separate": ":"}  # overlapping curves stay visible
+@dataclass(frozen=True)
+class Panel:
+    """One of the paper's figures: which series, how it is labelled, and what is written beside it."""
+
+    file: str
+    field: str
+    ylabel: str
+    title: str
+    truth: bool = False  # draw the true fault too
+    caption: str = ""  # printed under the axes
+    reference: float | None = None  # a horizontal line the model predicts
+    reference_label: str = ""
 
 
 def _limits(series: list[np.ndarray], floor: float) -> tuple[float, float]:
@@ -39,62 +45,74 @@ def _limits(series: list[np.ndarray], floor: float) -> tuple[float, float]:
     return lo - pad, hi + pad
 
 
-def _panel(ax, runs: dict[str, Trace], field: str, onset: int | None, ylabel: str, title: str, truth: bool,
-           unstable: frozenset[str], note: str = "") -> None:
-    scaled = [getattr(t, field) for name, t in runs.items() if name not in unstable] or [getattr(t, field) for t in runs.values()]
-    series = list(scaled)
-    if truth:
+def _panel(ax, runs: dict[str, Trace], panel: Panel, onset: int | None, title: str, unstable: frozenset[str],
+           xlabel: bool = True) -> None:
+    stable = [getattr(t, panel.field) for name, t in runs.items() if name not in unstable]
+    series = stable or [getattr(t, panel.field) for t in runs.values()]
+    if panel.truth:
         first = next(iter(runs.values()))
-        ax.step(first.k, first.f, where="post", color="black", lw=2.0, label="true fault f")
+        ax.step(first.k, first.f, where="post", color="black", lw=2.0, zorder=2, label="true fault f")
         series.append(first.f)
+    if panel.reference is not None:
+        ax.axhline(panel.reference, color="black", ls=(0, (1, 3)), lw=1.2, zorder=2, label=panel.reference_label)
+        series.append(np.array([panel.reference]))
     lo, hi = _limits(series, 0.5)
-    for name, t in runs.items():
-        y = getattr(t, field)
+    every = max(3, len(runs))  # one design's marker per sample: coincident curves show every design's marks
+    for i, (name, t) in enumerate(runs.items()):
+        y = getattr(t, panel.field)
         left = bool(np.any(~np.isfinite(y)) or np.any((y < lo) | (y > hi)))
-        label = f"{name}{' (unstable loop: clipped)' if left else ''}"
         faint = name in unstable  # drawn underneath, so the stable designs stay readable
-        ax.plot(t.k, np.clip(y, lo, hi), marker="" if faint else ".", ms=3, lw=0.8 if faint else 1.4,
-                alpha=0.45 if faint else 1.0, zorder=1 if faint else 3, color=COLOURS.get(name),
-                ls=STYLES.get(name, "-"), label=label)
+        style = look(name)
+        ax.plot(t.k, np.clip(y, lo, hi), color=style.colour, ls=style.line, lw=0.8 if faint else 1.4,
+                marker="" if faint else style.marker, ms=4, markevery=(i % every, every),
+                alpha=0.45 if faint else 1.0, zorder=1 if faint else 3,
+                label=f"{name}{' (unstable loop: clipped)' if left else ''}")
     if onset is not None:
         ax.axvline(onset, color="grey", ls="--", lw=1)
-        ax.annotate(f"fault onset k = {onset}", (onset, hi), xytext=(4, -14), textcoords="offset points", fontsize=8, color="grey")
+        ax.annotate(f"fault onset k = {onset}", (onset, hi), xytext=(4, -14), textcoords="offset points", fontsize=8,
+                    color="grey")
     ax.set_ylim(lo, hi)
-    ax.set_xlabel("sample k (h = 1 s)")
-    ax.set_ylabel(ylabel)
+    if xlabel:
+        ax.set_xlabel("sample k (h = 1 s)")
+    ax.set_ylabel(panel.ylabel)
     ax.set_title(title)
     ax.grid(alpha=0.3)
-    if note:
-        ax.text(0.0, -0.2, note, transform=ax.transAxes, fontsize=7.5, color="dimgrey", va="top")  # a caption
-    # outside the axes, so that no curve is ever hidden behind it
+    if panel.caption:
+        ax.text(0.0, -0.2 if xlabel else -0.08, panel.caption, transform=ax.transAxes, fontsize=7.5, color="dimgrey",
+                va="top")
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
 
 
 def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subtitle: str,
-                  unstable: frozenset[str] = frozenset()) -> list[Path]:
-    """Write fig3_fault_estimate.png, fig4_alpha.png, fig5_q.png and an overview; return their paths."""
+                  unstable: frozenset[str] = frozenset(), q_caption: str = "", q_steady: float | None = None) -> list[Path]:
+    """Write fig3_fault_estimate.png, fig4_alpha.png, fig5_q.png and an overview; return their paths.
+
+    ``q_caption`` and ``q_steady`` (``monitor.demo.steady.q_caption``) explain Fig. 5's pitch-rate offset.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    specs = [
-        ("fig3_fault_estimate.png", "f_hat", "elevator fault (deg)", "Fig. 3: fault estimate f_hat vs true fault", True, ""),
-        ("fig4_alpha.png", "alpha", "angle of attack alpha (deg)", "Fig. 4: angle of attack after the fault", False, ""),
-        ("fig5_q.png", "q", "pitch rate q (deg/s)", "Fig. 5: pitch rate after the fault", False, Q_OFFSET_NOTE),
+    panels = [
+        Panel("fig3_fault_estimate.png", "f_hat", "elevator fault (deg)", "Fig. 3: fault estimate f_hat vs true fault",
+              truth=True),
+        Panel("fig4_alpha.png", "alpha", "angle of attack alpha (deg)", "Fig. 4: angle of attack after the fault"),
+        Panel("fig5_q.png", "q", "pitch rate q (deg/s)", "Fig. 5: pitch rate after the fault", caption=q_caption,
+              reference=q_steady,
+              reference_label="" if q_steady is None else f"model: q with alpha held at 0 ({q_steady:.2f})"),
     ]
     paths = []
-    for name, field, ylabel, title, truth, note in specs:
+    for panel in panels:
         fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
-        _panel(ax, runs, field, onset, ylabel, f"{title}\n{subtitle}", truth, unstable, note)
-        fig.tight_layout()
-        path = out_dir / name
+        _panel(ax, runs, panel, onset, f"{panel.title}\n{subtitle}", unstable)
+        path = out_dir / panel.file
         fig.savefig(path, bbox_inches="tight")
         plt.close(fig)
         paths.append(path)
-    fig, axes = plt.subplots(3, 1, figsize=(10, 10), dpi=100, sharex=True)
-    for ax, (_, field, ylabel, title, truth, note) in zip(axes, specs):
-        _panel(ax, runs, field, onset, ylabel, title, truth, unstable, note)
+    fig, axes = plt.subplots(len(panels), 1, figsize=(10, 10), dpi=100, sharex=True)
+    for i, (ax, panel) in enumerate(zip(axes, panels)):
+        _panel(ax, runs, panel, onset, panel.title, unstable, xlabel=i == len(panels) - 1)
     fig.suptitle(subtitle, fontsize=9)
     fig.tight_layout()
     path = out_dir / "overview.png"

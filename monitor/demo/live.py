@@ -143,7 +143,7 @@ def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progre
                 raise UserError(f"sim-vehicle did not finish {scenario.steps} samples within {budget:.0f} s")
             with lock:
                 k = run.estimates[-1]["k"] if run.estimates else -1
-            progress(f"{method:<10} live: sample {k + 1:>4}/{scenario.steps}")
+            progress(f"{method:<15} live: sample {k + 1:>4}/{scenario.steps}")
             time.sleep(0.25)
         run.sim_exit = sim.stop()
         sim = None

@@ -5,6 +5,12 @@ per second and no sockets. It steps the exact discrete model (``B0(tau(k))``, ``
 ``monitor.delay_model``) with the same ``Estimator`` the live monitor runs, so it differs from the
 live run only in what the network adds (real latency, loss). Additive faults only (bias, ramp): loss of
 effectiveness and stuck act on the actuator, which only the vehicle simulator models.
+
+The actuator is the live vehicle's: ``sim-vehicle`` clips every command to the plant's ``[actuator] limit``
+(30 deg on ``paper-continuous``) and the monitor's ``Estimator`` saturates its commands at the same limit, so
+the deflection that acts here is clipped the same way. Without it an unstable design's alpha grows without
+bound (8e11 deg) while the live vehicle's stays within the swing the elevator's travel allows (~15 deg), and
+the two tables could not be compared. A rate-limited actuator is refused: only ``sim-vehicle`` models the slew.
 """
 
 from __future__ import annotations
@@ -20,7 +26,7 @@ from monitor.errors import UserError
 from monitor.estimator import Estimator
 from monitor.plant import Plant
 
-__all__ = ["Trace", "simulate", "monte_carlo", "Score", "score"]
+__all__ = ["Trace", "actuator", "simulate", "monte_carlo", "Score", "score"]
 
 
 @dataclass
@@ -45,11 +51,19 @@ class Score:
     rms_alpha_after: float | None
 
 
+def actuator(plant: Plant, u: np.ndarray) -> np.ndarray:
+    """The deflection that acts for command ``u``: clipped at the plant's limit, as ``sim-vehicle`` does."""
+    limit = plant.actuator.limit
+    return np.clip(u, -limit, limit) if limit is not None else u
+
+
 def simulate(plant: Plant, gains: Gains, steps: int, fault, delay, wind_values) -> Trace:
     """Step plant + observer + controller for ``steps`` samples with delay ``delay.tau(k)`` each sample."""
     if not fault.additive_only:
         raise UserError("the Monte-Carlo mode simulates additive faults only (bias, ramp); loe/stuck need sim-vehicle")
-    est = Estimator(plant, gains)
+    if plant.actuator.rate_limit is not None:
+        raise UserError("the Monte-Carlo mode does not model a rate-limited elevator; run the live demo (sim-vehicle)")
+    est = Estimator(plant, gains)  # saturates its commands at the actuator limit, as the live monitor does
     state = est.initial_state()
     x = np.zeros(plant.n)
     u_prev = np.zeros(plant.m)
@@ -61,11 +75,12 @@ def simulate(plant: Plant, gains: Gains, steps: int, fault, delay, wind_values) 
         d = np.array([next(wind_values)] + [0.0] * (plant.p - 1))
         tau = min(max(float(delay.tau(k)), 0.0), tau_hi)
         step = est.step(state, k, plant.C @ x)
+        u = actuator(plant, step.u)
         B0t = b0_of_tau(plant, tau)
-        out["f"][k], out["f_hat"][k], out["u"][k], out["tau"][k] = f[0], step.f_hat[0], step.u[0], tau
+        out["f"][k], out["f_hat"][k], out["u"][k], out["tau"][k] = f[0], step.f_hat[0], u[0], tau
         out["alpha"][k], out["q"][k] = x[0], x[1] if plant.n > 1 else 0.0
-        x = plant.A @ x + B0t @ step.u + (Bsum - B0t) @ u_prev + plant.Df @ f + plant.Dd @ d
-        u_prev = step.u
+        x = plant.A @ x + B0t @ u + (Bsum - B0t) @ u_prev + plant.Df @ f + plant.Dd @ d
+        u_prev = u
     return Trace(k=np.arange(steps), **out)
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from monitor.demo.live import Scenario
+from monitor.demo.methods import METHODS
 from monitor.errors import UserError
 
 __all__ = ["DemoOptions", "run_demo"]
@@ -19,9 +20,11 @@ __all__ = ["DemoOptions", "run_demo"]
 
 @dataclass(frozen=True)
 class DemoOptions:
+    """What ``fault-monitor demo`` was asked for; ``methods`` is data: any design ``run_design`` knows."""
+
     scenario: Scenario = field(default_factory=Scenario)
     out: str = "demo-out"
-    methods: tuple[str, ...] = ("certified", "robust-separate", "paper", "separate")
+    methods: tuple[str, ...] = METHODS
     runs: int | None = None
     redesign: bool = False
     figures: bool = True
@@ -114,13 +117,16 @@ def run_demo(options: DemoOptions) -> int:
     figures = []
     if opt.figures:
         from monitor.demo.figures import write_figures
+        from monitor.demo.steady import q_caption
 
         unstable = frozenset(m for m, v in verdicts.items() if not v.stable)
-        figures = [str(p) for p in write_figures(traces, fault.onset, out, subtitle, unstable)]
+        caption, q_steady = q_caption(plant, fault, scenario.steps)
+        figures = [str(p) for p in write_figures(traces, fault.onset, out, subtitle, unstable, caption, q_steady)]
     print(f"\nPaper scenario, live over MAVLink/UDP + Zenoh ({subtitle}; {scenario.steps} samples at {scenario.speedup:g}x)\n")
     print(format_table(rows))
-    print("\nFE settling: samples after onset until |f_hat - f| <= 5 % of the fault for good; 2 is the floor: no "
-          "observer of form (5) can settle sooner (paper-findings). Alarm delay in samples after onset.")
+    print("\nFE settling: samples after onset until |f_hat - f| <= 5 % of the fault for good. 2 is the floor, the "
+          "earliest possible, not a limit to stay under: the fault first shows in y one sample after onset, so no "
+          "observer of form (5) settles sooner. Alarm delay: samples after onset.")
     print(f"Recordings: {', '.join(r['rrd'] for r in runs.values())}  (rerun FILE.rrd | fault-monitor replay FILE.rrd)")
     if figures:
         print(f"Figures:    {', '.join(figures)}")

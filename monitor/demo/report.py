@@ -11,9 +11,9 @@ import numpy as np
 from monitor import metrics
 from monitor.demo.montecarlo import Trace
 
-__all__ = ["Row", "trace_from_recording", "row_from_recording", "format_table", "SETTLING_LIMIT"]
+__all__ = ["Row", "trace_from_recording", "row_from_recording", "format_table", "SETTLING_FLOOR"]
 
-SETTLING_LIMIT = 2  # paper-findings: f(20) first reaches y(21), so no design settles before onset + 2
+SETTLING_FLOOR = 2  # a floor: f(20) first reaches y(21), so no observer of form (5) settles before onset + 2
 
 
 @dataclass
@@ -83,7 +83,7 @@ def _fmt(value, spec: str = ".3f", none: str = "never") -> str:
 
 def format_table(rows: list[Row]) -> str:
     head = ["design", "real loop", "certificate", "gamma_e", "gamma_z", "samples",
-            f"FE settling, samples (floor {SETTLING_LIMIT})", "RMS e_f after onset", "peak |alpha| after, deg", "RMS alpha after, deg",
+            f"FE settling, samples (floor {SETTLING_FLOOR})", "RMS e_f after onset", "peak |alpha| after, deg", "RMS alpha after, deg",
             "alarm delay, samples", "false alarms"]
     body = [[r.method, "stable" if r.stable else "UNSTABLE", r.certificate, _fmt(r.gamma_e), _fmt(r.gamma_z),
              str(r.samples), _fmt(r.settling_steps, "d"), _fmt(r.rms_ef, ".3g"), _fmt(r.peak_alpha_after, ".3g"),

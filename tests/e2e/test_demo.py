@@ -61,7 +61,7 @@ def test_monte_carlo_mode_depends_on_the_seed_and_keeps_the_live_summary(out):
     assert ra["rms_ef_mean"] != rb["rms_ef_mean"]
     assert (out / "summary.json").read_bytes() == live_summary  # Monte-Carlo has its own file
     # the unstable design swings between the elevator limits, as on the live vehicle: alpha stays bounded
-    assert not a["results"]["separate"]["stable"] and a["results"]["separate"]["peak_alpha_worst"] < 90
+    assert not a["results"]["separate"]["stable"] and a["results"]["separate"]["peak_alpha_worst"] < 30
 
 
 def test_bad_options_are_one_line(tmp_path):
