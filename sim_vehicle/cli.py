@@ -43,18 +43,20 @@ turbulence:SIGMA[:TAU]. See sim_vehicle/README.md for the physics.
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="sim-vehicle",
-        description="Simulated UAV (short-period pitch dynamics) speaking MAVLink 2, for testing fault-monitor.",
+        description="A simulated UAV (short-period pitch dynamics) speaking MAVLink 2: the vehicle fault-monitor is "
+                    "tested and demonstrated against. It publishes the exact truth on Zenoh for scoring.",
         epilog="Start with: sim-vehicle run --help",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     run = sub.add_parser(
         "run",
-        help="run the vehicle daemon",
+        help="fly a simulated aircraft: send MAVLink telemetry to a monitor, apply its elevator commands",
         description=(
-            "Fly the continuous plant exactly (matrix exponentials between events). Every sampling instant "
-            "k*h the vehicle sends ATTITUDE + AOA_SSA + ACTUATOR_OUTPUT_STATUS (one datagram) to the monitor; "
-            "a SET_ACTUATOR_CONTROL_TARGET answering sample k is applied when it arrives, after the emulated "
-            "delay. Stops after --steps samples or on SIGINT/SIGTERM, prints a summary, exits 0."
+            "Fly the continuous plant exactly (matrix exponentials between events). Every sampling instant\n"
+            "k*h the vehicle sends ATTITUDE + AOA_SSA + ACTUATOR_OUTPUT_STATUS (one datagram) to the monitor;\n"
+            "a SET_ACTUATOR_CONTROL_TARGET answering sample k is applied when it arrives, after the emulated\n"
+            "delay. The exact truth (state, fault, wind, delay) goes to Zenoh <prefix>/<sysid>/truth.\n"
+            "Stops after --steps samples or on SIGINT/SIGTERM, prints a summary, exits 0."
         ),
         epilog=EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -86,10 +88,10 @@ def build_parser() -> argparse.ArgumentParser:
     n.add_argument("--delay-split", default=0.5, type=float, metavar="R",
                    help="share of the delay spent before the sample is sent (sensor->controller); the rest is "
                         "the controller->actuator budget (default: 0.5)")
-    n.add_argument("--loss", default=0.0, type=float, metavar="P", help="loss probability per datagram, both ways")
-    n.add_argument("--duplicate", default=0.0, type=float, metavar="P", help="duplication probability per datagram")
+    n.add_argument("--loss", default=0.0, type=float, metavar="P", help="loss probability per datagram, both ways (default: 0)")
+    n.add_argument("--duplicate", default=0.0, type=float, metavar="P", help="duplication probability per datagram (default: 0)")
     n.add_argument("--reorder", default=0.0, type=float, metavar="P",
-                   help="probability that a datagram is held ~1 sample so the next overtakes it")
+                   help="probability that a datagram is held ~1 sample so the next overtakes it (default: 0)")
     m = run.add_argument_group("MAVLink")
     m.add_argument("--mavlink", default="udpout:127.0.0.1:14550", metavar="udpout:HOST:PORT",
                    help="where the monitor listens (default: udpout:127.0.0.1:14550); commands come back to "

@@ -12,7 +12,7 @@ from monitor.design import METHODS, OBJECTIVES
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "design",
-        help="design observer + controller gains (LMIs, cvxpy + Clarabel) and write a gains file",
+        help="compute the fault observer and controller gains for a plant and write them to a gains file",
         description=(
             "Design the fault-estimation observer (L, M) and the fault-tolerant controller (K1, K2, K3) for a plant.\n"
             "  certified: one Lyapunov certificate over every delay in the interval (default), objective:\n"

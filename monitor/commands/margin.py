@@ -10,7 +10,7 @@ import sys
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "margin",
-        help="largest certifiable tau_max (bisection, a certificate at each step) and the curve gamma_e(tau_max)",
+        help="how much network delay the loop can take: the largest certifiable tau_max, and the cost curve",
         description=(
             "How much delay could the loop take? Bisect on the upper delay bound tau_max in [tau_min, h): at each\n"
             "probe design the certified gains for the plant with that interval and keep the probe only if its\n"

@@ -17,7 +17,7 @@ DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "router", help="a Zenoh router with the project's defaults (zenohd is not installable here)",
+        "router", help="a Zenoh router, so monitors, vehicles and subscribers on several hosts see each other",
         description=(
             "Run a Zenoh router: monitors, vehicles and subscribers connect to it as clients "
             "(--zenoh-mode client --zenoh-connect EP) and see each other's estimates, alarms and truth. "

@@ -9,8 +9,8 @@ __all__ = ["register", "add_model_arguments", "load_models", "add_alarm_argument
 
 def add_model_arguments(p: argparse.ArgumentParser, fleet: bool = True) -> None:
     """The flags that say which plant, gains and signal map serve the vehicles (shared with ``analyse``)."""
-    p.add_argument("--plant", metavar="P", help="plant preset (paper, paper-continuous) or plant TOML file: the "
-                   "default model for every vehicle the fleet file does not list")
+    p.add_argument("--plant", metavar="P", help="plant preset (paper, paper-continuous) or plant TOML file"
+                   + (": the default model for every vehicle the fleet file does not list" if fleet else ""))
     p.add_argument("--gains", metavar="GAINS.toml", help="gains file for --plant (from fault-monitor design)")
     p.add_argument("--signals", metavar="FILE", help="signal map for --plant: a TOML file with a [signals] table "
                    "naming the MAVLink fields of y, the actuator report and the command (default: the plant file's "

@@ -10,7 +10,7 @@ import math
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "threshold",
-        help="proven upper bound on |f_hat| with no fault and |d| <= D, for every delay sequence in the interval",
+        help="an alarm threshold wind cannot cross: a proven bound on |f_hat| with no fault and |d| <= D",
         description=(
             "With no fault, zero initial state and a disturbance |d(k)| <= D, how large can |f_hat| get, whatever\n"
             "the delay does inside the plant's interval? The l1 norm of the time-varying impulse response d -> f_hat:\n"

@@ -10,7 +10,7 @@ import math
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "verify",
-        help="check gains on the real closed loop (u(k-1) state, every delay); exit 0 iff stable",
+        help="check any gains on the real closed loop for every delay in the interval; exit 0 iff stable",
         description=(
             "Build the real closed loop (plant with the u(k-1) state, observer (5), controller (6)) from the plant and\n"
             "the gains alone, and report: the worst spectral radius over a dense grid of constant delays, the growth\n"
