@@ -27,9 +27,20 @@ import numpy as np
 from monitor.closed_loop import Gains, closed_loop, observer_indices
 from monitor.plant import Plant
 
-__all__ = ["loss_modes", "loss_sequences", "macro_steps", "LOSS_KINDS"]
+__all__ = ["loss_modes", "loss_sequences", "macro_steps", "check_max_losses", "LOSS_KINDS", "MAX_LOSSES"]
 
 LOSS_KINDS = ("sample", "command")
+MAX_LOSSES = 8  # 2^(N+1) - 1 loss runs per delay vertex: N = 8 is ~2,000 LMI blocks, a few tens of seconds
+
+
+def check_max_losses(max_losses: int) -> int:
+    """The N of ``--max-losses``, refused with one line when negative or beyond what can be certified in time."""
+    from monitor.errors import UserError
+
+    if not 0 <= max_losses <= MAX_LOSSES:
+        raise UserError(f"--max-losses must be between 0 and {MAX_LOSSES} (every run of up to N losses is "
+                        f"enumerated: 2^(N+1) - 1 of them), got {max_losses}")
+    return max_losses
 
 
 def loss_modes(plant: Plant, gains: Gains) -> dict[str, np.ndarray]:

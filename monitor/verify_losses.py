@@ -28,7 +28,7 @@ import numpy as np
 
 from monitor.closed_loop import Gains, closed_loop, steady_state
 from monitor.delay_model import b0_of_tau, b0_polytope, tau_grid
-from monitor.loss_model import loss_modes, loss_sequences, macro_steps
+from monitor.loss_model import check_max_losses, loss_modes, loss_sequences, macro_steps
 from monitor.plant import Plant
 
 __all__ = ["LossVerdict", "verify_losses", "contraction"]
@@ -143,8 +143,7 @@ def _searched_norm(plant: Plant, gains: Gains, vertices: list[np.ndarray], max_l
 def verify_losses(plant: Plant, gains: Gains, max_losses: int, certificate: dict[str, np.ndarray] | None = None,
                   seed: int = 0) -> LossVerdict:
     """The verdict described in the module docstring."""
-    if max_losses < 0:
-        raise ValueError(f"max_losses must be >= 0, got {max_losses}")
+    check_max_losses(max_losses)
     gains.check_shapes(plant)
     try:
         steady = steady_state(plant, gains)

@@ -54,8 +54,9 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--weight-y must be >= 0, got {args.weight_y}")
     if args.objective and args.method != "certified":
         raise UserError(f"--objective applies to --method certified only, not {args.method}")
-    if args.max_losses < 0:
-        raise UserError(f"--max-losses must be >= 0, got {args.max_losses}")
+    from monitor.loss_model import check_max_losses
+
+    check_max_losses(args.max_losses)
     options = {"weight_y": args.weight_y, "max_losses": args.max_losses}
     if args.objective:
         options["objective"] = args.objective

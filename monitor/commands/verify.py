@@ -77,8 +77,10 @@ def run(args: argparse.Namespace) -> int:
         gains.check_shapes(plant)
     except ValueError as exc:
         raise UserError(str(exc)) from None
-    if args.max_losses is not None and args.max_losses < 0:
-        raise UserError(f"--max-losses must be >= 0, got {args.max_losses}")
+    if args.max_losses is not None:
+        from monitor.loss_model import check_max_losses
+
+        check_max_losses(args.max_losses)
     verdict = verify_gains(plant, gains, certificate or None, gamma_e, gamma_z)
     losses = None
     if args.max_losses is not None:

@@ -20,8 +20,10 @@ def run_design(method: str, plant: Plant, **options) -> DesignResult:
     """Dispatch to the method's module; imported lazily because cvxpy's import costs about a second."""
     objective = options.pop("objective", None)
     max_losses = int(options.pop("max_losses", 0) or 0)
-    if max_losses < 0:
-        raise ValueError(f"max_losses must be >= 0, got {max_losses}")
+    if max_losses:
+        from monitor.loss_model import check_max_losses
+
+        check_max_losses(max_losses)
     if max_losses and (method, objective) in (("certified", None), ("certified", "fast")):
         options["max_losses"] = max_losses  # the fast search steers away from loss-divergent controllers
     if objective is not None and (method != "certified" or objective not in OBJECTIVES):
