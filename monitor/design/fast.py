@@ -7,7 +7,7 @@ possible, and it diverges when every other sample is lost. Two facts give a bett
 1. **Fault-direction deadbeat observer.** A step fault ``Delta f`` at k0 reaches ``y`` at k0+1 and
    ``[e_x; e_f](k0+2) = [(A - L C) Df + Df; I - M C Df] Delta f``. Choosing ``[L; M] C Df = [(A + I) Df; I]``
    makes that zero: at the nominal delay a step fault is estimated exactly two samples after onset,
-   the earliest any observer of form (5) can (``notes/paper-findings.md``). When ``C Df`` is square and
+   the earliest any observer of form (5) can: f(k0) first shows in y(k0+1). When ``C Df`` is square and
    invertible this pins (L, M); with more outputs than faults the minimum-norm solution is taken.
 2. **What spoils it is delay mismatch, and the controller sets its size.** Away from the nominal delay
    the observer error is driven by ``(B0(tau) - B0) (u(k) - u(k-1))`` (see ``monitor.closed_loop``): the

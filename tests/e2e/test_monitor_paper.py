@@ -23,7 +23,7 @@ from tests.daemons import Daemon, free_tcp_port, free_udp_port, wait_for
 
 ONSET = 20
 BIAS = 2.0
-EARLIEST_SETTLING = 2  # paper-findings.md: no observer (5) can settle sooner than 2 samples after onset
+EARLIEST_SETTLING = 2  # no observer (5) can settle sooner: the fault first shows in y one sample after onset
 SLACK = 4  # "within a few samples of the limit"
 
 
