@@ -38,7 +38,9 @@ from monitor.plant import Plant
 __all__ = ["ThresholdBound", "fault_threshold", "frozen_l1"]
 
 HEAD = 8  # terms enumerated exactly (4^8 = 65,536 vertex sequences for a 4-vertex polytope)
-BLOCKS = (2, 4, 6, 8)  # tail block lengths tried; the one giving the smallest tail is kept
+BLOCKS = (1, 2, 4, 6, 8)  # tail block lengths tried; the one giving the smallest tail is kept
+SEQUENCE_BUDGET = 65_536  # vertex sequences enumerated per length: V^length grows fast with the polytope
+ELEMENT_BUDGET = 2**24  # floats held by one array of vertex products (134 MB)
 
 
 @dataclass
@@ -46,17 +48,32 @@ class ThresholdBound:
     threshold: float  # proven sup |f_hat| for |d| <= disturbance_bound
     per_unit_disturbance: float
     disturbance_bound: float
-    head: float  # per unit D: the exact worst of the first HEAD terms
+    head: float  # per unit D: the exact worst of the first head_terms terms
     tail: float  # per unit D: the bound on the rest
     frozen_l1: float  # per unit D: l1 norm of d -> f_hat at the worst constant delay (what is actually reachable)
     tau_frozen_worst: float
     ratio_to_frozen: float
     block: int
     block_contraction: float
+    head_terms: int  # how many terms were enumerated exactly (fewer when the polytope has many vertices)
+    vertices: int  # of the delay polytope
     method: str = "l1 of the time-varying impulse response: vertex enumeration + Lyapunov-norm tail"
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+def _affordable_length(vertices: int, size: int) -> int:
+    """The longest vertex sequence (at most HEAD) whose enumeration fits the budgets, at least 1.
+
+    Why: a plant with more states or inputs has a polytope of 8, 16 or more vertices, and 16^8 products of
+    its loop matrices would not fit in memory; a shorter head only makes the bound less tight, never wrong.
+    """
+    budget = min(SEQUENCE_BUDGET, ELEMENT_BUDGET // (size * size))
+    length = 1
+    while length < HEAD and vertices ** (length + 1) <= budget:
+        length += 1
+    return length
 
 
 def _vertex_products(mats: np.ndarray, length: int) -> np.ndarray:
@@ -103,40 +120,68 @@ def fault_threshold(plant: Plant, gains: Gains, disturbance_bound: float) -> Thr
     nominal = closed_loop(plant, gains, plant.B0, steady=steady).A
     if np.max(np.abs(np.linalg.eigvals(nominal))) >= 1.0:
         raise UserError("no threshold: the loop is unstable at the nominal delay (see fault-monitor verify)")
-    P = scipy.linalg.solve_discrete_lyapunov(nominal.T, np.eye(nominal.shape[0]))
-    R = np.linalg.cholesky(0.5 * (P + P.T)).T  # ||x||_P = ||R x||
-    R_inv = np.linalg.inv(R)
-    P_inv = R_inv @ R_inv.T
-    contracting = []  # (block length, contraction): every length that contracts is tried, the best tail kept
-    for length in BLOCKS:
-        rho = float(np.max(np.linalg.norm(R @ _vertex_products(A, length) @ R_inv, 2, axis=(1, 2))))
-        if rho < 1.0:
-            contracting.append((length, rho))
+    head_terms = _affordable_length(len(A), A.shape[1])
+    R = _lyapunov_factor(nominal)
+    contracting = _contracting_blocks(A, R, head_terms)
     if not contracting:
         raise UserError(f"no threshold: the loop is not proven stable for time-varying delays (products of up to "
-                        f"{BLOCKS[-1]} samples do not contract; see fault-monitor verify)")
+                        f"{head_terms} samples do not contract; see fault-monitor verify)")
     worst, head_total, tail_total, block, contraction = 0.0, 0.0, 0.0, 0, 1.0
-    for i in range(C.shape[0]):  # each fault channel's |f_hat_i|; the threshold is on the largest
-        c = C[i]
-        head = 0.0
-        vectors = [B[:, col][None, :] for col in range(B.shape[1])]
-        for _ in range(HEAD):
-            head += sum(float(np.abs(v @ c).max()) for v in vectors)
-            vectors = [np.einsum("vab,nb->vna", A, v).reshape(-1, A.shape[1]) for v in vectors]
-        beta = sum(float(np.linalg.norm(v @ R.T, axis=1).max()) for v in vectors)
-        best_tail, best_block = np.inf, (0, 1.0)
-        for length, rho in contracting:
-            dual = sum(float(np.sqrt(np.einsum("na,ab,nb->n", rows, P_inv, rows)).max())
-                       for rows in (np.einsum("a,nab->nb", c, _vertex_products(A, r)) for r in range(length)))
-            if beta * dual / (1.0 - rho) < best_tail:
-                best_tail, best_block = beta * dual / (1.0 - rho), (length, rho)
-        if head + best_tail > worst:
-            worst, head_total, tail_total = head + best_tail, head, best_tail
-            block, contraction = best_block
+    for c in C:  # each fault channel's |f_hat_i|; the threshold is on the largest
+        head, tail, (length, rho) = _channel_bound(c, A, B, R, head_terms, contracting)
+        if head + tail > worst:
+            worst, head_total, tail_total, block, contraction = head + tail, head, tail, length, rho
     worst *= 1.0 + 1e-9  # floating-point slack on a sum of a few thousand terms
     l1, tau_l1 = frozen_l1(plant, gains)
     return ThresholdBound(
         threshold=worst * disturbance_bound, per_unit_disturbance=worst, disturbance_bound=float(disturbance_bound),
         head=head_total, tail=tail_total, frozen_l1=l1, tau_frozen_worst=tau_l1,
         ratio_to_frozen=worst / l1 if l1 > 0 else float("inf"), block=block, block_contraction=contraction,
+        head_terms=head_terms, vertices=len(A),
     )
+
+
+def _lyapunov_factor(nominal: np.ndarray) -> np.ndarray:
+    """``R`` with ``||x||_P = ||R x||`` for the nominal loop's Lyapunov matrix (``A' P A - P = -I``).
+
+    Any positive definite P gives a valid norm; this one only has to make blocks of vertex products contract.
+    """
+    P = scipy.linalg.solve_discrete_lyapunov(nominal.T, np.eye(nominal.shape[0]))
+    try:
+        return np.linalg.cholesky(0.5 * (P + P.T)).T
+    except np.linalg.LinAlgError:
+        raise UserError("no threshold: the nominal loop is too close to instability for a Lyapunov norm") from None
+
+
+def _contracting_blocks(A: np.ndarray, R: np.ndarray, longest: int) -> list[tuple[int, float]]:
+    """``(length, rho)`` for every affordable block length whose vertex products all contract in the R norm.
+
+    The induced norm of a product is convex in each factor, so its maximum over the polytope is at vertices.
+    """
+    R_inv = np.linalg.inv(R)
+    out = []
+    for length in sorted({b for b in BLOCKS if b <= longest} | {longest}):
+        rho = float(np.max(np.linalg.norm(R @ _vertex_products(A, length) @ R_inv, 2, axis=(1, 2))))
+        if rho < 1.0:
+            out.append((length, rho))
+    return out
+
+
+def _channel_bound(c: np.ndarray, A: np.ndarray, B: np.ndarray, R: np.ndarray, head_terms: int,
+                   contracting: list[tuple[int, float]]) -> tuple[float, float, tuple[int, float]]:
+    """``(head, tail, (block, rho))`` per unit D for one fault channel ``c``: the head exactly, the best tail."""
+    R_inv = np.linalg.inv(R)
+    P_inv = R_inv @ R_inv.T
+    head = 0.0
+    vectors = [B[:, col][None, :] for col in range(B.shape[1])]
+    for _ in range(head_terms):
+        head += sum(float(np.abs(v @ c).max()) for v in vectors)
+        vectors = [np.einsum("vab,nb->vna", A, v).reshape(-1, A.shape[1]) for v in vectors]
+    beta = sum(float(np.linalg.norm(v @ R.T, axis=1).max()) for v in vectors)
+    best_tail, best_block = np.inf, (0, 1.0)
+    for length, rho in contracting:
+        dual = sum(float(np.sqrt(np.einsum("na,ab,nb->n", rows, P_inv, rows)).max())
+                   for rows in (np.einsum("a,nab->nb", c, _vertex_products(A, r)) for r in range(length)))
+        if beta * dual / (1.0 - rho) < best_tail:
+            best_tail, best_block = beta * dual / (1.0 - rho), (length, rho)
+    return head, best_tail, best_block
