@@ -15,9 +15,15 @@ convex weights and each term's largest magnitude is reached at a sequence of pol
   ``beta = max ||Phi_T B||_P`` and ``c_r = max ||C Phi_r||_P*`` (dual norm) for r < T',
   ``sum_{j >= T} |C Phi_j B| <= beta * sum_r c_r / (1 - rho)``.
 
-Both parts are upper bounds for the polytope, hence for every delay sequence in the interval. The head is
-what a constant delay can reach almost exactly, so the bound is tight where it matters: it is reported next
-to the l1 norm at the worst frozen delay (a lower bound of the truth), and their ratio.
+Both parts are upper bounds for the polytope, hence for every delay sequence in the interval ("blocks").
+
+A second proof ("paths") uses that every term of e_f(k) sees the *same* delay sequence: it is the largest
+``sum_j |r_j B|_1`` along one vertex path of rows ``r_{j+1} = r_j A_i`` from ``r_0 = c`` (a sum of convex functions
+of each step's convex weights, so again a vertex maximum), searched worst-first, with a cost-to-go from a common
+quadratic norm in which every vertex contracts (an LMI solved with Clarabel, its contraction and constants then
+recomputed in numpy, so the solver is never trusted). The smaller of the two is the threshold; either is a proof.
+The head is what a constant delay can reach almost exactly, so the bound is tight where it matters: it is
+reported next to the l1 norm at the worst frozen delay (a lower bound of the truth), and their ratio.
 
 Not modelled: actuator saturation (the bound is for the linear loop; saturation only happens far above
 any sensible alarm level) and sensor noise (add its contribution if the vehicle has any).
@@ -25,6 +31,7 @@ any sensible alarm level) and sensor noise (add its contribution if the vehicle 
 
 from __future__ import annotations
 
+import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -48,16 +55,20 @@ class ThresholdBound:
     threshold: float  # proven sup |f_hat| for |d| <= disturbance_bound
     per_unit_disturbance: float
     disturbance_bound: float
-    head: float  # per unit D: the exact worst of the first head_terms terms
-    tail: float  # per unit D: the bound on the rest
     frozen_l1: float  # per unit D: l1 norm of d -> f_hat at the worst constant delay (what is actually reachable)
     tau_frozen_worst: float
     ratio_to_frozen: float
+    method: str  # the proof that gave the (smaller) bound: "paths" or "blocks"
+    bound_paths: float | None  # per unit D: best-first vertex paths + common quadratic cost-to-go (None: no such norm)
+    bound_blocks: float | None  # per unit D: per-term vertex enumeration + block tail (None: blocks do not contract)
+    ellipsoid: float | None  # per unit D: the common quadratic norm alone (the invariant-ellipsoid bound), for scale
+    common_rate: float | None  # the contraction of every vertex in that norm, re-checked in numpy
+    path_depth: int  # every delay path was followed exactly at least this many samples
+    head_terms: int  # terms enumerated exactly by the block proof (fewer when the polytope has many vertices)
     block: int
     block_contraction: float
-    head_terms: int  # how many terms were enumerated exactly (fewer when the polytope has many vertices)
     vertices: int  # of the delay polytope
-    method: str = "l1 of the time-varying impulse response: vertex enumeration + Lyapunov-norm tail"
+    seconds: float
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -120,26 +131,44 @@ def fault_threshold(plant: Plant, gains: Gains, disturbance_bound: float) -> Thr
     nominal = closed_loop(plant, gains, plant.B0, steady=steady).A
     if np.max(np.abs(np.linalg.eigvals(nominal))) >= 1.0:
         raise UserError("no threshold: the loop is unstable at the nominal delay (see fault-monitor verify)")
+    started = time.perf_counter()
     head_terms = _affordable_length(len(A), A.shape[1])
-    R = _lyapunov_factor(nominal)
-    contracting = _contracting_blocks(A, R, head_terms)
-    if not contracting:
-        raise UserError(f"no threshold: the loop is not proven stable for time-varying delays (products of up to "
-                        f"{head_terms} samples do not contract; see fault-monitor verify)")
-    worst, head_total, tail_total, block, contraction = 0.0, 0.0, 0.0, 0, 1.0
-    for c in C:  # each fault channel's |f_hat_i|; the threshold is on the largest
-        head, tail, (length, rho) = _channel_bound(c, A, B, R, head_terms, contracting)
-        if head + tail > worst:
-            worst, head_total, tail_total, block, contraction = head + tail, head, tail, length, rho
-    worst *= 1.0 + 1e-9  # floating-point slack on a sum of a few thousand terms
+    contracting = _contracting_blocks(A, _lyapunov_factor(nominal), head_terms)
+    channels = [_channel_proofs(c, A, B, nominal, head_terms, contracting) for c in C]
+    proven = [ch for ch in channels if ch["bound"] is not None]
+    if len(proven) < len(channels):
+        raise UserError("no threshold: the loop is not proven stable for time-varying delays (no common quadratic "
+                        f"norm contracts, nor products of up to {head_terms} samples; see fault-monitor verify)")
+    worst = max(proven, key=lambda ch: ch["bound"])  # the threshold is on the largest |f_hat_i|
+    per_unit = worst["bound"] * (1.0 + 1e-9)  # floating-point slack on sums of thousands of terms
     l1, tau_l1 = frozen_l1(plant, gains)
     return ThresholdBound(
-        threshold=worst * disturbance_bound, per_unit_disturbance=worst, disturbance_bound=float(disturbance_bound),
-        head=head_total, tail=tail_total, frozen_l1=l1, tau_frozen_worst=tau_l1,
-        ratio_to_frozen=worst / l1 if l1 > 0 else float("inf"), block=block, block_contraction=contraction,
-        head_terms=head_terms, vertices=len(A),
+        threshold=per_unit * disturbance_bound, per_unit_disturbance=per_unit,
+        disturbance_bound=float(disturbance_bound), frozen_l1=l1, tau_frozen_worst=tau_l1,
+        ratio_to_frozen=per_unit / l1 if l1 > 0 else float("inf"), method=worst["method"],
+        bound_paths=worst["paths"], bound_blocks=worst["blocks"], ellipsoid=worst["ellipsoid"],
+        common_rate=worst["rate"], path_depth=worst["depth"], head_terms=head_terms, block=worst["block"],
+        block_contraction=worst["contraction"], vertices=len(A), seconds=time.perf_counter() - started,
     )
 
+
+def _channel_proofs(c: np.ndarray, A: np.ndarray, B: np.ndarray, nominal: np.ndarray, head_terms: int,
+                    contracting: list[tuple[int, float]]) -> dict:
+    """Both proofs for one fault channel; ``bound`` is the smaller (either is a proof on its own)."""
+    out = {"blocks": None, "paths": None, "ellipsoid": None, "rate": None, "depth": 0, "block": 0, "contraction": 1.0}
+    if contracting:
+        head, tail, (out["block"], out["contraction"]) = _channel_bound(c, A, B, _lyapunov_factor(nominal),
+                                                                      head_terms, contracting)
+        out["blocks"] = head + tail
+    norm = _common_norm(A, B, c)
+    if norm is not None:
+        R, out["rate"], gamma = norm
+        out["ellipsoid"] = gamma * float(_dual(c, R)[0])
+        out["paths"], out["depth"] = _best_first_bound(A, B, c, R, gamma)
+    found = {k: out[k] for k in ("paths", "blocks") if out[k] is not None}
+    out["method"] = min(found, key=found.get) if found else None
+    out["bound"] = found[out["method"]] if found else None
+    return out
 
 def _lyapunov_factor(nominal: np.ndarray) -> np.ndarray:
     """``R`` with ``||x||_P = ||R x||`` for the nominal loop's Lyapunov matrix (``A' P A - P = -I``).
@@ -185,3 +214,101 @@ def _channel_bound(c: np.ndarray, A: np.ndarray, B: np.ndarray, R: np.ndarray, h
         if beta * dual / (1.0 - rho) < best_tail:
             best_tail, best_block = beta * dual / (1.0 - rho), (length, rho)
     return head, best_tail, best_block
+
+
+# --- along one delay path: a quadratic cost-to-go and best-first search -------------------------------------
+#
+# All terms of e_f(k) share one delay sequence, so the exact quantity is a maximum over paths of rows
+# r_0 = c, r_{j+1} = r_j A(tau_{k-1-j}), of sum_j |r_j B|_1. A norm ||r||_* = sqrt(r P^-1 r') in which every
+# vertex contracts by rho gives the cost-to-go g(r) = beta ||r||_* / (1 - rho), beta = sum_col ||B_col||_P,
+# which satisfies g(r) >= |r B|_1 + g(r A_i): so s + g(r) never grows along a path, and the largest of it over
+# any frontier that every path crosses is a proof. Expanding the worst frontier node first tightens it.
+
+RHO_FRACTIONS = (0.02, 0.3, 0.6, 0.85)  # rho tried between the best common rate and 1
+RATE_BISECTIONS = 9
+EXPANSIONS = 20_000  # frontier nodes expanded per fault channel (best first)
+
+
+def _common_norm(A: np.ndarray, B: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, float, float] | None:
+    """``(R, rho, gamma)`` with ``||x||_P = ||R x||``, every ``||R A_i R^-1|| <= rho < 1`` and ``g(c) = gamma ||c||_*``.
+
+    P comes from an LMI (common ``A_i' P A_i <= rho^2 P``, the shape that makes ``g(c)`` smallest), solved with
+    Clarabel; nothing the solver says is trusted: rho and beta are recomputed in numpy from the P it returns.
+    None when no common quadratic norm contracts (then the block bound is used).
+    """
+    import cvxpy as cp
+
+    from monitor.design.solve import SolveFailed, solve_problem
+
+    N = A.shape[1]
+    rho2 = cp.Parameter(nonneg=True)
+    P = cp.Variable((N, N), symmetric=True)
+    contract = [rho2 * P - Ai.T @ P @ Ai >> 0 for Ai in A]
+    rate = cp.Problem(cp.Minimize(0), [P >> np.eye(N), cp.trace(P) <= 1e4 * N, *contract])
+    lo, hi = 0.0, 1.0
+    for _ in range(RATE_BISECTIONS):  # the smallest common rate, to about 2^-RATE_BISECTIONS
+        rho2.value = (0.5 * (lo + hi)) ** 2
+        try:
+            solve_problem(rate)
+            hi = 0.5 * (lo + hi)
+        except SolveFailed:
+            lo = 0.5 * (lo + hi)
+    if hi >= 1.0:
+        return None
+    t = cp.Variable((1, 1))
+    shape = cp.Problem(cp.Minimize(t), [P >> 1e-6 * np.eye(N), cp.bmat([[t, c[None, :]], [c[:, None], P]]) >> 0,
+                                        cp.sum([cp.quad_form(B[:, k], P) for k in range(B.shape[1])]) <= 1.0,
+                                        *contract])
+    best = None
+    for fraction in RHO_FRACTIONS:
+        rho2.value = (hi + fraction * (1.0 - hi)) ** 2
+        try:
+            solve_problem(shape)
+        except SolveFailed:
+            continue
+        candidate = _checked_norm(P.value, A, B)
+        if candidate is not None and (best is None or candidate[2] * _dual(c, candidate[0]) < best[2] * _dual(c, best[0])):
+            best = candidate
+    return best
+
+
+def _checked_norm(P: np.ndarray | None, A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, float, float] | None:
+    """``(R, rho, gamma)`` recomputed in numpy from a proposed P, or None when it is no contracting norm."""
+    if P is None or not np.all(np.isfinite(P)):
+        return None
+    try:
+        R = np.linalg.cholesky(0.5 * (P + P.T)).T
+    except np.linalg.LinAlgError:
+        return None
+    R_inv = np.linalg.inv(R)
+    rho = float(np.max(np.linalg.norm(R @ A @ R_inv, 2, axis=(1, 2))))
+    if not rho < 1.0:
+        return None
+    beta = float(np.linalg.norm(R @ B, axis=0).sum())
+    return R, rho, beta / (1.0 - rho)
+
+
+def _dual(rows: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """``||r||_* = sqrt(r P^-1 r')``, the dual of ``||x||_P = ||R x||``, row by row."""
+    return np.linalg.norm(np.linalg.solve(R.T, np.atleast_2d(rows).T), axis=0)
+
+
+def _best_first_bound(A: np.ndarray, B: np.ndarray, c: np.ndarray, R: np.ndarray, gamma: float,
+                      budget: int = EXPANSIONS) -> tuple[float, int]:
+    """``(bound, depth)``: max of ``s + gamma ||r||_*`` over a frontier grown worst-node-first from the root c.
+
+    Each node is a vertex path: its row r and the sum s of ``|r_j B|_1`` so far. The returned depth is the
+    shallowest frontier node's, i.e. every path was followed exactly at least that far.
+    """
+    import heapq
+
+    heap = [(-gamma * float(_dual(c, R)[0]), 0, 0.0, c, 0)]
+    counter = 1
+    for _ in range(budget):
+        _, _, s, r, depth = heapq.heappop(heap)
+        s_child = s + float(np.abs(r @ B).sum())
+        rows = np.einsum("a,vab->vb", r, A)
+        for row, value in zip(rows, s_child + gamma * _dual(rows, R)):
+            heapq.heappush(heap, (-float(value), counter, s_child, row, depth + 1))
+            counter += 1
+    return -heap[0][0], min(node[4] for node in heap)
