@@ -41,7 +41,8 @@ class MavProxy(Daemon):
         self.master = master
         self.cmd = [sys.executable, _mavproxy_script(), f"--master=udpin:127.0.0.1:{master}",
                     f"--out={out_kind}:127.0.0.1:{out}", "--daemon", "--mav20", "--dialect=ardupilotmega",
-                    f"--state-basedir={tmp_path}", f"--logfile={self.tlog}", "--default-modules=", "--nowait"]
+                    f"--state-basedir={tmp_path}", f"--logfile={self.tlog}", "--default-modules=", "--nowait",
+                    "--cmd=set flushlogs True"]  # else the tlog tail sits in a buffer a signal may never write
 
     def __enter__(self) -> "MavProxy":
         super().__enter__()
@@ -58,6 +59,18 @@ class MavProxy(Daemon):
         except subprocess.TimeoutExpired:
             pass
         return super().stop(timeout)
+
+
+def _wait_for_tlog(mp: MavProxy, timeout: float = 10.0) -> None:
+    """MAVProxy writes its tlog from a queue on its own thread and a signal can end it before the queue drains:
+    wait (bounded) until the tlog holds the vehicle's last sample before stopping it."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if mp.tlog.exists() and _tlog_counts(mp.tlog)[("AOA_SSA", 1)] >= STEPS - 1:  # as the tests require
+            return
+        time.sleep(0.2)
 
 
 def _tlog_counts(path: Path) -> Counter:
@@ -94,6 +107,7 @@ def test_closed_loop_through_mavproxy(tmp_path: Path, gains_file: Path, monitor_
         wait_ready(monitor)
         with _vehicle(tmp_path, master_port) as vehicle:
             assert vehicle.wait(60) == 0, vehicle.log()
+        _wait_for_tlog(mp)
         mp.stop()
         log = monitor.log()
         assert monitor.stop() == 0
@@ -118,6 +132,7 @@ def test_observe_only_live_and_from_mavproxys_tlog_agree(tmp_path: Path, gains_f
         wait_ready(monitor)
         with _vehicle(tmp_path, master_port, "--autopilot", "-0.5") as vehicle:
             assert vehicle.wait(60) == 0, vehicle.log()
+        _wait_for_tlog(mp)
         mp.stop()
         assert monitor.stop() == 0, monitor.log()[-2000:]
     log = monitor.log()
