@@ -34,10 +34,20 @@ class Gains:
     K2: np.ndarray
     K3: np.ndarray
 
+    @staticmethod
+    def shapes(plant: Plant) -> dict[str, tuple[int, int]]:
+        """The shape each gain must have for ``plant``."""
+        n, m, l, q = plant.n, plant.m, plant.l, plant.q
+        return {"L": (n, l), "M": (q, l), "K1": (m, l), "K2": (m, m), "K3": (m, q)}
+
+    @classmethod
+    def zero(cls, plant: Plant, **given: np.ndarray) -> Gains:
+        """Zero gains for ``plant`` except those ``given`` (the designs probe the loop, e.g. with no observer)."""
+        return cls(**{name: given.get(name, np.zeros(shape)) for name, shape in cls.shapes(plant).items()})
+
     def check_shapes(self, plant: Plant) -> None:
         """Raise ValueError naming the first gain whose shape does not fit the plant."""
-        n, m, l, q = plant.n, plant.m, plant.l, plant.q
-        expected = {"L": (n, l), "M": (q, l), "K1": (m, l), "K2": (m, m), "K3": (m, q)}
+        expected = self.shapes(plant)
         for name, shape in expected.items():
             actual = getattr(self, name).shape
             if actual != shape:

@@ -58,7 +58,7 @@ class CertificateLMI:
         self.vertices = vertices
         N = 2 * plant.n + plant.q + plant.m
         nw = plant.p + plant.q
-        probe = closed_loop(plant, _zero_gains(plant), plant.B0,
+        probe = closed_loop(plant, Gains.zero(plant), plant.B0,
                             steady=(np.zeros((plant.n, plant.q)), np.zeros((plant.m, plant.q))))
         self.P = cp.Variable((N, N), symmetric=True)
         self.Q = cp.Variable((N, N), symmetric=True)
@@ -91,8 +91,3 @@ class CertificateLMI:
         return Certificate(gamma_e=float(np.sqrt(self.g_e.value)), gamma_z=float(np.sqrt(self.g_z.value)),
                            P=self.P.value, Q=self.Q.value, status=status)
 
-
-def _zero_gains(plant: Plant) -> Gains:
-    z = np.zeros
-    return Gains(L=z((plant.n, plant.l)), M=z((plant.q, plant.l)), K1=z((plant.m, plant.l)),
-                 K2=z((plant.m, plant.m)), K3=z((plant.m, plant.q)))

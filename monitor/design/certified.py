@@ -84,7 +84,7 @@ class ObserverLMI:
         G = self._E_o @ self.G_o @ self._E_o.T + T_c @ self.G_c @ T_c.T
         self.A_params = [cp.Parameter((N, N)) for _ in vertices]
         self.B_params = [cp.Parameter((N, nw)) for _ in vertices]
-        loop0 = closed_loop(plant, _zero_gains(plant), plant.B0, steady=(np.zeros((n, q)), np.zeros((m, q))))
+        loop0 = closed_loop(plant, Gains.zero(plant), plant.B0, steady=(np.zeros((n, q)), np.zeros((m, q))))
         constraints = []  # P, Q > 0 follow from the -P, -Q diagonal blocks
         correction = self._E_o @ self.W @ C_o  # G^T (A_K - E_o [L; M] C_o) = G^T A_K - E_o W C_o
         for A_i, B_i in zip(self.A_params, self.B_params):
@@ -98,7 +98,7 @@ class ObserverLMI:
         """Best observer for this controller, or None when no certificate exists for it."""
         plant = self.plant
         K3 = fault_cancelling_K3(plant, K2)
-        zero_obs = Gains(L=np.zeros((plant.n, plant.l)), M=np.zeros((plant.q, plant.l)), K1=K1, K2=K2, K3=K3)
+        zero_obs = Gains.zero(plant, K1=K1, K2=K2, K3=K3)
         try:
             steady = steady_state(plant, zero_obs)
         except ValueError:
@@ -124,14 +124,9 @@ class ObserverLMI:
         )
 
 
-def _zero_gains(plant: Plant) -> Gains:
-    z = np.zeros
-    return Gains(L=z((plant.n, plant.l)), M=z((plant.q, plant.l)), K1=z((plant.m, plant.l)), K2=z((plant.m, plant.m)), K3=z((plant.m, plant.q)))
-
-
 def _spectral_margin(plant: Plant, vertices: list[np.ndarray], K1: np.ndarray, K2: np.ndarray) -> float:
     """Worst spectral radius of the controller part over the vertices: guides the search where no certificate exists."""
-    gains = Gains(L=np.zeros((plant.n, plant.l)), M=np.zeros((plant.q, plant.l)), K1=K1, K2=K2, K3=fault_cancelling_K3(plant, K2))
+    gains = Gains.zero(plant, K1=K1, K2=K2, K3=fault_cancelling_K3(plant, K2))
     sx, _, _, su = observer_indices(plant)
     idx = list(range(sx.start, sx.stop)) + list(range(su.start, su.stop))
     worst = 0.0
