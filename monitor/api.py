@@ -25,13 +25,14 @@ recording written by ``run``, ``analyse`` or ``demo`` is read back with ``read_r
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
 from monitor.closed_loop import Gains
+from monitor.demo.montecarlo import Trace
 from monitor.design.result import DesignResult
 from monitor.errors import UserError
 from monitor.plant import Plant, load_plant, plant_from_table
@@ -152,19 +153,12 @@ def check_losses(plant: Plant, gains: Gains, max_losses: int, result: DesignResu
 
 
 @dataclass
-class SimulatedRun:
-    """One simulated run of the loop (numpy arrays per sample) and its scores, as ``replay`` computes them."""
+class SimulatedRun(Trace):
+    """One simulated run of the loop (numpy arrays per sample, as ``Trace``) and its scores, as ``replay`` computes them."""
 
-    k: np.ndarray
-    f: np.ndarray
-    f_hat: np.ndarray
-    alpha: np.ndarray
-    q: np.ndarray
-    u: np.ndarray
-    tau: np.ndarray
-    settling_steps: int | None
-    rms_ef: float | None
-    peak_alpha_after: float | None
+    settling_steps: int | None = None
+    rms_ef: float | None = None
+    peak_alpha_after: float | None = None
 
 
 def simulate(plant: Plant, gains: Gains, steps: int = 100, fault: str = "bias:2@20", delay: str | None = None,
@@ -174,20 +168,12 @@ def simulate(plant: Plant, gains: Gains, steps: int = 100, fault: str = "bias:2@
     ``delay`` defaults to uniform over the plant's interval. The same model as ``demo --runs``: the exact
     ``B0(tau(k))`` each sample, the monitor's own estimator, the actuator limit of the plant.
     """
-    from monitor.demo.montecarlo import score
-    from monitor.demo.montecarlo import simulate as run_simulation
-    from monitor.wire.specs import parse_delay_spec, parse_fault_spec
-    from sim_vehicle.wind import parse_wind_spec
+    from monitor.demo.montecarlo import run_scenario
 
-    spec = parse_fault_spec(fault)
     delay_spec = delay or f"uniform:{plant.tau_min}:{plant.tau_max}"
-    trace = run_simulation(plant, gains, steps, spec, parse_delay_spec(delay_spec, seed),
-                           parse_wind_spec(wind, plant.h, seed).values())
-    onset = spec.onset if spec.onset is not None else steps
-    sc = score(trace, onset, spec.f(onset) if spec.onset is not None else 0.0)
-    return SimulatedRun(k=trace.k, f=trace.f, f_hat=trace.f_hat, alpha=trace.alpha, q=trace.q, u=trace.u,
-                        tau=trace.tau, settling_steps=sc.settling_steps, rms_ef=sc.rms_ef,
-                        peak_alpha_after=sc.peak_alpha_after)
+    trace, sc = run_scenario(plant, gains, steps, fault, delay_spec, wind, seed)
+    return SimulatedRun(**{f.name: getattr(trace, f.name) for f in fields(Trace)}, settling_steps=sc.settling_steps,
+                        rms_ef=sc.rms_ef, peak_alpha_after=sc.peak_alpha_after)
 
 
 def read_gains(path: str | Path) -> Gains:

@@ -11,7 +11,7 @@ from monitor.closed_loop import Gains, closed_loop, observer_indices
 from monitor.design import run_design
 from monitor.design.paper import lemma3_K2_K3
 from monitor.errors import DesignFailed
-from monitor.plant import load_plant, parse_plant
+from monitor.plant import parse_plant
 from monitor.verify import verify_gains
 from tests.designs import designed
 

@@ -8,7 +8,6 @@ import sys
 import tomllib
 
 import numpy as np
-import pytest
 
 from monitor.closed_loop import Gains, closed_loop, steady_state
 from monitor.delay_model import b0_of_tau, b0_polytope, input_sum

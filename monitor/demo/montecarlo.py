@@ -26,7 +26,7 @@ from monitor.errors import UserError
 from monitor.estimator import Estimator
 from monitor.plant import Plant
 
-__all__ = ["Trace", "actuator", "simulate", "monte_carlo", "Score", "score"]
+__all__ = ["Trace", "actuator", "simulate", "run_scenario", "monte_carlo", "Score", "score"]
 
 
 @dataclass
@@ -95,18 +95,20 @@ def score(trace: Trace, onset: int, size: float) -> Score:
     )
 
 
-def monte_carlo(plant: Plant, gains: Gains, runs: int, steps: int, fault_spec: str, delay_spec: str,
-                wind_spec: str, seed: int = 0) -> list[Score]:
-    """``runs`` simulations with delay seeds ``seed, seed+1, ...`` (wind and fault identical)."""
+def run_scenario(plant: Plant, gains: Gains, steps: int, fault_spec: str, delay_spec: str, wind_spec: str,
+                 seed: int) -> tuple[Trace, Score]:
+    """One run of the scenario given as the contract's SPECs (delay and wind drawn with ``seed``), and its score."""
     from monitor.wire.specs import parse_delay_spec, parse_fault_spec
     from sim_vehicle.wind import parse_wind_spec
 
     fault = parse_fault_spec(fault_spec)
+    wind = parse_wind_spec(wind_spec, plant.h, seed)
+    trace = simulate(plant, gains, steps, fault, parse_delay_spec(delay_spec, seed), wind.values())
     onset = fault.onset
-    size = fault.f(onset) if onset is not None else 0.0
-    scores = []
-    for i in range(runs):
-        wind = parse_wind_spec(wind_spec, plant.h, seed + i)
-        trace = simulate(plant, gains, steps, fault, parse_delay_spec(delay_spec, seed + i), wind.values())
-        scores.append(score(trace, onset if onset is not None else steps, size))
-    return scores
+    return trace, score(trace, onset if onset is not None else steps, fault.f(onset) if onset is not None else 0.0)
+
+
+def monte_carlo(plant: Plant, gains: Gains, runs: int, steps: int, fault_spec: str, delay_spec: str,
+                wind_spec: str, seed: int = 0) -> list[Score]:
+    """``runs`` simulations with delay seeds ``seed, seed+1, ...`` (wind and fault identical)."""
+    return [run_scenario(plant, gains, steps, fault_spec, delay_spec, wind_spec, seed + i)[1] for i in range(runs)]
