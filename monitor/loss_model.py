@@ -27,7 +27,8 @@ import numpy as np
 from monitor.closed_loop import Gains, closed_loop, observer_indices
 from monitor.plant import Plant
 
-__all__ = ["loss_modes", "loss_sequences", "macro_steps", "check_max_losses", "LOSS_KINDS", "MAX_LOSSES"]
+__all__ = ["loss_modes", "loss_sequences", "macro_steps", "macro_step_growth", "check_max_losses", "LOSS_KINDS",
+           "MAX_LOSSES"]
 
 LOSS_KINDS = ("sample", "command")
 MAX_LOSSES = 8  # 2^(N+1) - 1 loss runs per delay vertex: N = 8 is ~2,000 LMI blocks, a few tens of seconds
@@ -80,3 +81,13 @@ def macro_steps(plant: Plant, gains: Gains, b0_points: list[np.ndarray], max_los
         runs.append(product)
     delivered = [closed_loop(plant, gains, b0, steady=steady).A for b0 in b0_points]
     return [D @ run for D in delivered for run in runs]
+
+
+def macro_step_growth(plant: Plant, gains: Gains, b0_points: list[np.ndarray], max_losses: int,
+                      steady: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """Growth per sample, ``rho(S) ** (1 / (j + 1))``, of every macro-step: ``[b0 point, loss run]`` in the order
+    of ``b0_points`` and ``loss_sequences``. Above 1 anywhere: that pattern, repeated, diverges (a lower bound)."""
+    steps = np.array(macro_steps(plant, gains, b0_points, max_losses, steady))
+    samples = np.array([len(seq) + 1 for seq in loss_sequences(max_losses)])
+    radii = np.max(np.abs(np.linalg.eigvals(steps)), axis=-1).reshape(len(b0_points), len(samples))
+    return radii ** (1.0 / samples)

@@ -28,7 +28,7 @@ import numpy as np
 
 from monitor.closed_loop import Gains, closed_loop, steady_state
 from monitor.delay_model import b0_of_tau, b0_polytope, tau_grid
-from monitor.loss_model import check_max_losses, loss_modes, loss_sequences, macro_steps
+from monitor.loss_model import check_max_losses, loss_modes, loss_sequences, macro_step_growth, macro_steps
 from monitor.plant import Plant
 
 __all__ = ["LossVerdict", "verify_losses", "contraction"]
@@ -65,14 +65,11 @@ def _divergence_search(plant: Plant, gains: Gains, steady, max_losses: int, rng:
                        steps: int = 1200) -> tuple[float, str]:
     """The worst growth per sample over macro-steps on a delay grid and over long adversarial/random patterns."""
     taus = tau_grid(plant, 21)
-    worst, where = 0.0, "none"
-    seqs = loss_sequences(max_losses)
-    steps_grid = macro_steps(plant, gains, [b0_of_tau(plant, float(t)) for t in taus], max_losses, steady)
-    for i, S in enumerate(steps_grid):
-        t, seq = taus[i // len(seqs)], seqs[i % len(seqs)]
-        rate = float(np.max(np.abs(np.linalg.eigvals(S)))) ** (1.0 / (len(seq) + 1))
-        if rate > worst:
-            worst, where = rate, f"repeat [{' '.join(('lost ' + k) for k in seq) or 'no loss'}; delivered at tau={t:.4f}]"
+    growth = macro_step_growth(plant, gains, [b0_of_tau(plant, float(t)) for t in taus], max_losses, steady)
+    i, j = np.unravel_index(int(np.argmax(growth)), growth.shape)
+    seq = loss_sequences(max_losses)[j]
+    worst = float(growth[i, j])
+    where = f"repeat [{' '.join(('lost ' + k) for k in seq) or 'no loss'}; delivered at tau={taus[i]:.4f}]"
     modes = loss_modes(plant, gains)
     delivered = [closed_loop(plant, gains, b0_of_tau(plant, float(t)), steady=steady).A for t in taus]
     mats = delivered + [modes["sample"], modes["command"]]

@@ -35,7 +35,7 @@ from monitor.delay_model import b0_of_tau, b0_polytope
 from monitor.design.certificate import CertificateLMI
 from monitor.design.result import DesignResult
 from monitor.errors import DesignFailed
-from monitor.loss_model import loss_sequences, macro_steps
+from monitor.loss_model import macro_step_growth
 from monitor.plant import Plant
 from monitor.verify import hinf_norm
 
@@ -87,9 +87,7 @@ def _loss_growth(plant: Plant, gains: Gains, steady, max_losses: int) -> float:
     A lower bound of the switched loop's growth: the search's cheap guide; the certificate decides.
     """
     ends = [b0_of_tau(plant, t) for t in (plant.tau_min, plant.tau_max)]
-    steps = macro_steps(plant, gains, ends, max_losses, steady)
-    lengths = [len(seq) + 1 for _ in ends for seq in loss_sequences(max_losses)]
-    return max(float(np.max(np.abs(np.linalg.eigvals(S)))) ** (1.0 / n) for S, n in zip(steps, lengths))
+    return float(macro_step_growth(plant, gains, ends, max_losses, steady).max())
 
 
 def _frozen_bounds(plant: Plant, gains: Gains, steady) -> tuple[float, float, float]:
