@@ -40,6 +40,7 @@ import scipy.linalg
 from monitor.closed_loop import Gains, closed_loop, steady_state
 from monitor.delay_model import b0_of_tau, b0_polytope, tau_grid
 from monitor.errors import UserError
+from monitor.norms import dual_norms, induced_norms, norm_factor
 from monitor.plant import Plant
 
 __all__ = ["ThresholdBound", "fault_threshold", "frozen_l1"]
@@ -163,7 +164,7 @@ def _channel_proofs(c: np.ndarray, A: np.ndarray, B: np.ndarray, nominal: np.nda
     norm = _common_norm(A, B, c)
     if norm is not None:
         R, out["rate"], gamma = norm
-        out["ellipsoid"] = gamma * float(_dual(c, R)[0])
+        out["ellipsoid"] = gamma * float(dual_norms(c, R)[0])
         out["paths"], out["depth"] = _best_first_bound(A, B, c, R, gamma)
     found = {k: out[k] for k in ("paths", "blocks") if out[k] is not None}
     out["method"] = min(found, key=found.get) if found else None
@@ -175,11 +176,10 @@ def _lyapunov_factor(nominal: np.ndarray) -> np.ndarray:
 
     Any positive definite P gives a valid norm; this one only has to make blocks of vertex products contract.
     """
-    P = scipy.linalg.solve_discrete_lyapunov(nominal.T, np.eye(nominal.shape[0]))
-    try:
-        return np.linalg.cholesky(0.5 * (P + P.T)).T
-    except np.linalg.LinAlgError:
-        raise UserError("no threshold: the nominal loop is too close to instability for a Lyapunov norm") from None
+    R = norm_factor(scipy.linalg.solve_discrete_lyapunov(nominal.T, np.eye(nominal.shape[0])))
+    if R is None:
+        raise UserError("no threshold: the nominal loop is too close to instability for a Lyapunov norm")
+    return R
 
 
 def _contracting_blocks(A: np.ndarray, R: np.ndarray, longest: int) -> list[tuple[int, float]]:
@@ -187,10 +187,9 @@ def _contracting_blocks(A: np.ndarray, R: np.ndarray, longest: int) -> list[tupl
 
     The induced norm of a product is convex in each factor, so its maximum over the polytope is at vertices.
     """
-    R_inv = np.linalg.inv(R)
     out = []
     for length in sorted({b for b in BLOCKS if b <= longest} | {longest}):
-        rho = float(np.max(np.linalg.norm(R @ _vertex_products(A, length) @ R_inv, 2, axis=(1, 2))))
+        rho = float(np.max(induced_norms(R, _vertex_products(A, length))))
         if rho < 1.0:
             out.append((length, rho))
     return out
@@ -199,8 +198,6 @@ def _contracting_blocks(A: np.ndarray, R: np.ndarray, longest: int) -> list[tupl
 def _channel_bound(c: np.ndarray, A: np.ndarray, B: np.ndarray, R: np.ndarray, head_terms: int,
                    contracting: list[tuple[int, float]]) -> tuple[float, float, tuple[int, float]]:
     """``(head, tail, (block, rho))`` per unit D for one fault channel ``c``: the head exactly, the best tail."""
-    R_inv = np.linalg.inv(R)
-    P_inv = R_inv @ R_inv.T
     head = 0.0
     vectors = [B[:, col][None, :] for col in range(B.shape[1])]
     for _ in range(head_terms):
@@ -209,8 +206,8 @@ def _channel_bound(c: np.ndarray, A: np.ndarray, B: np.ndarray, R: np.ndarray, h
     beta = sum(float(np.linalg.norm(v @ R.T, axis=1).max()) for v in vectors)
     best_tail, best_block = np.inf, (0, 1.0)
     for length, rho in contracting:
-        dual = sum(float(np.sqrt(np.einsum("na,ab,nb->n", rows, P_inv, rows)).max())
-                   for rows in (np.einsum("a,nab->nb", c, _vertex_products(A, r)) for r in range(length)))
+        dual = sum(float(dual_norms(np.einsum("a,nab->nb", c, _vertex_products(A, r)), R).max())
+                   for r in range(length))
         if beta * dual / (1.0 - rho) < best_tail:
             best_tail, best_block = beta * dual / (1.0 - rho), (length, rho)
     return head, best_tail, best_block
@@ -259,6 +256,10 @@ def _common_norm(A: np.ndarray, B: np.ndarray, c: np.ndarray) -> tuple[np.ndarra
     shape = cp.Problem(cp.Minimize(t), [P >> 1e-6 * np.eye(N), cp.bmat([[t, c[None, :]], [c[:, None], P]]) >> 0,
                                         cp.sum([cp.quad_form(B[:, k], P) for k in range(B.shape[1])]) <= 1.0,
                                         *contract])
+
+    def bound(norm: tuple[np.ndarray, float, float]) -> float:  # g(c) = gamma ||c||_*
+        return norm[2] * float(dual_norms(c, norm[0])[0])
+
     best = None
     for fraction in RHO_FRACTIONS:
         rho2.value = (hi + fraction * (1.0 - hi)) ** 2
@@ -267,30 +268,21 @@ def _common_norm(A: np.ndarray, B: np.ndarray, c: np.ndarray) -> tuple[np.ndarra
         except SolveFailed:
             continue
         candidate = _checked_norm(P.value, A, B)
-        if candidate is not None and (best is None or candidate[2] * _dual(c, candidate[0]) < best[2] * _dual(c, best[0])):
+        if candidate is not None and (best is None or bound(candidate) < bound(best)):
             best = candidate
     return best
 
 
 def _checked_norm(P: np.ndarray | None, A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, float, float] | None:
     """``(R, rho, gamma)`` recomputed in numpy from a proposed P, or None when it is no contracting norm."""
-    if P is None or not np.all(np.isfinite(P)):
+    R = norm_factor(P)
+    if R is None:
         return None
-    try:
-        R = np.linalg.cholesky(0.5 * (P + P.T)).T
-    except np.linalg.LinAlgError:
-        return None
-    R_inv = np.linalg.inv(R)
-    rho = float(np.max(np.linalg.norm(R @ A @ R_inv, 2, axis=(1, 2))))
+    rho = float(np.max(induced_norms(R, A)))
     if not rho < 1.0:
         return None
     beta = float(np.linalg.norm(R @ B, axis=0).sum())
     return R, rho, beta / (1.0 - rho)
-
-
-def _dual(rows: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """``||r||_* = sqrt(r P^-1 r')``, the dual of ``||x||_P = ||R x||``, row by row."""
-    return np.linalg.norm(np.linalg.solve(R.T, np.atleast_2d(rows).T), axis=0)
 
 
 def _best_first_bound(A: np.ndarray, B: np.ndarray, c: np.ndarray, R: np.ndarray, gamma: float,
@@ -302,13 +294,13 @@ def _best_first_bound(A: np.ndarray, B: np.ndarray, c: np.ndarray, R: np.ndarray
     """
     import heapq
 
-    heap = [(-gamma * float(_dual(c, R)[0]), 0, 0.0, c, 0)]
+    heap = [(-gamma * float(dual_norms(c, R)[0]), 0, 0.0, c, 0)]
     counter = 1
     for _ in range(budget):
         _, _, s, r, depth = heapq.heappop(heap)
         s_child = s + float(np.abs(r @ B).sum())
         rows = np.einsum("a,vab->vb", r, A)
-        for row, value in zip(rows, s_child + gamma * _dual(rows, R)):
+        for row, value in zip(rows, s_child + gamma * dual_norms(rows, R)):
             heapq.heappush(heap, (-float(value), counter, s_child, row, depth + 1))
             counter += 1
     return -heap[0][0], min(node[4] for node in heap)

@@ -29,6 +29,7 @@ import numpy as np
 from monitor.closed_loop import Gains, closed_loop, steady_state
 from monitor.delay_model import b0_of_tau, b0_polytope, tau_grid
 from monitor.loss_model import check_max_losses, loss_modes, loss_sequences, macro_step_growth, macro_steps
+from monitor.norms import induced_norms, norm_factor
 from monitor.plant import Plant
 
 __all__ = ["LossVerdict", "verify_losses", "contraction"]
@@ -114,20 +115,17 @@ def _averaged_lyapunov(steps: list[np.ndarray], iterations: int = 500) -> np.nda
 
 
 def contraction(P: np.ndarray, steps: list[np.ndarray], depth: int = 1) -> float:
-    """``max ||product||_P ** (1/depth)`` over every product of ``depth`` macro-steps; inf when P is no norm.
+    """``max ||product||_P ** (1/depth)`` over every product of ``depth`` (1 or 2) macro-steps; inf when P is no norm.
 
     < 1 proves that every product of the steps (in any order, any convex combination) converges.
     """
-    P = 0.5 * (P + P.T)
-    if not np.all(np.isfinite(P)) or np.min(np.linalg.eigvalsh(P)) <= 0:
+    R = norm_factor(P)
+    if R is None:
         return float("inf")
-    R = np.linalg.cholesky(P).T  # P = R^T R, ||x||_P = ||R x||
-    R_inv = np.linalg.inv(R)
-    scaled = np.array([R @ S @ R_inv for S in steps])
-    if depth == 1:
-        return float(max(np.linalg.norm(T, 2) for T in scaled))
-    pairs = np.einsum("iab,jbc->ijac", scaled, scaled).reshape(-1, *scaled.shape[1:])
-    return float(np.max(np.linalg.norm(pairs, 2, axis=(1, 2)))) ** 0.5
+    mats = np.array(steps)
+    if depth == 2:
+        mats = np.einsum("iab,jbc->ijac", mats, mats).reshape(-1, *mats.shape[1:])
+    return float(np.max(induced_norms(R, mats))) ** (1.0 / depth)
 
 
 def _searched_norm(plant: Plant, gains: Gains, vertices: list[np.ndarray], max_losses: int) -> np.ndarray | None:
