@@ -92,7 +92,9 @@ class Fleet:
         return self.by_sysid.get(sysid, self.default)
 
     def models(self) -> list[VehicleModel]:
-        return [m for m in (self.default, *self.by_sysid.values()) if m is not None]
+        """Each model once (vehicles naming the same plant, gains and signals share one), default first."""
+        distinct = {id(m): m for m in (self.default, *self.by_sysid.values()) if m is not None}
+        return list(distinct.values())
 
 
 def load_fleet(path: str | Path, default: VehicleModel | None, force: bool = False) -> Fleet:
