@@ -1,7 +1,8 @@
-"""Gains files: what ``design`` writes and ``verify``, ``run`` and ``demo`` read (TOML, see CONTRACT.md).
+"""Gains files: what ``design`` writes and ``verify``, ``run`` and ``demo`` read (TOML).
 
-A gains file records the method, the five gain matrices, the bounds the design claims, the solver's
-status and times, the certificate (Lyapunov matrices and polytope vertices) and the hash of the plant
+A gains file records the method, the five gain matrices, the bounds the design claims, how its LMI was
+solved (the path that produced the accepted point, the solver's status word there, the margin of the numpy
+re-check) and the times, the certificate (Lyapunov matrices and polytope vertices) and the hash of the plant
 it was designed for, so that ``verify`` can re-check the certificate and ``run`` can refuse a mismatch.
 """
 
@@ -70,8 +71,8 @@ def write_gains(path: str | Path, result: DesignResult, plant: Plant) -> None:
             **({"max_losses": result.max_losses} if result.max_losses else {}),
         },
         "solver": {
-            "name": "CLARABEL",
-            "status": result.solver_status,
+            **({"path": result.solved.path, "status": result.solved.status,
+                "check_margin": float(result.solved.margin)} if result.solved else {"path": "none"}),
             "build_seconds": round(result.build_seconds, 4),
             "solve_seconds": round(result.solve_seconds, 4),
             "total_seconds": round(result.total_seconds, 4),

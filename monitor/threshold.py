@@ -230,23 +230,29 @@ def _common_norm(A: np.ndarray, B: np.ndarray, c: np.ndarray) -> tuple[np.ndarra
     """``(R, rho, gamma)`` with ``||x||_P = ||R x||``, every ``||R A_i R^-1|| <= rho < 1`` and ``g(c) = gamma ||c||_*``.
 
     P comes from an LMI (common ``A_i' P A_i <= rho^2 P``, the shape that makes ``g(c)`` smallest), solved with
-    Clarabel; nothing the solver says is trusted: rho and beta are recomputed in numpy from the P it returns.
+    Clarabel (``solve_checked``: accepted by its contraction re-evaluated in numpy); nothing else the solver says is
+    trusted either: rho and beta are recomputed in numpy from the P it returns.
     None when no common quadratic norm contracts (then the block bound is used).
     """
     import cvxpy as cp
 
-    from monitor.design.solve import SolveFailed, solve_problem
+    from monitor.design.solve import EPS, SolveFailed, solve_checked
 
     N = A.shape[1]
     rho2 = cp.Parameter(nonneg=True)
     P = cp.Variable((N, N), symmetric=True)
-    contract = [rho2 * P - Ai.T @ P @ Ai >> 0 for Ai in A]
+    contract = [(rho2 - EPS) * P - Ai.T @ P @ Ai >> 0 for Ai in A]  # strict by EPS, relative to P's own scale
     rate = cp.Problem(cp.Minimize(0), [P >> np.eye(N), cp.trace(P) <= 1e4 * N, *contract])
+
+    def contracts() -> float:  # rho^2 - max ||R A_i R^-1||^2 with P = R'R: how strictly every vertex contracts
+        R = norm_factor(0.5 * (P.value + P.value.T))
+        return -np.inf if R is None else float(rho2.value - np.max(induced_norms(R, A)) ** 2)
+
     lo, hi = 0.0, 1.0
     for _ in range(RATE_BISECTIONS):  # the smallest common rate, to about 2^-RATE_BISECTIONS
         rho2.value = (0.5 * (lo + hi)) ** 2
         try:
-            solve_problem(rate)
+            solve_checked(rate, contracts, retry_infeasible=False)
             hi = 0.5 * (lo + hi)
         except SolveFailed:
             lo = 0.5 * (lo + hi)
@@ -264,7 +270,7 @@ def _common_norm(A: np.ndarray, B: np.ndarray, c: np.ndarray) -> tuple[np.ndarra
     for fraction in RHO_FRACTIONS:
         rho2.value = (hi + fraction * (1.0 - hi)) ** 2
         try:
-            solve_problem(shape)
+            solve_checked(shape, contracts, retry_infeasible=False)
         except SolveFailed:
             continue
         candidate = _checked_norm(P.value, A, B)

@@ -71,7 +71,7 @@ def gains(tmp_path_factory) -> Path:
     g = Gains(L=(p.A + np.eye(2)) @ p.Df / cdf, M=np.array([[1.0 / cdf]]), K1=np.zeros((1, 1)), K2=np.zeros((1, 1)),
               K3=np.zeros((1, 1)))
     path = tmp_path_factory.mktemp("g") / "gains.toml"
-    write_gains(path, DesignResult(method="deadbeat", gains=g, gamma_e=0.0, gamma_z=0.0, solver_status="n/a",
+    write_gains(path, DesignResult(method="deadbeat", gains=g, gamma_e=0.0, gamma_z=0.0,
                                    build_seconds=0, solve_seconds=0, total_seconds=0), p)
     return path
 

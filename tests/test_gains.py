@@ -19,7 +19,7 @@ def test_round_trip_is_exact_and_matrices_are_one_line(tmp_path):
     rng = np.random.default_rng(1)
     gains = Gains(L=rng.normal(size=(2, 1)), M=rng.normal(size=(1, 1)), K1=rng.normal(size=(1, 1)),
                   K2=rng.normal(size=(1, 1)), K3=np.array([[1e-300]]))
-    result = DesignResult(method="certified", gains=gains, gamma_e=1.8, gamma_z=1.6, solver_status="optimal",
+    result = DesignResult(method="certified", gains=gains, gamma_e=1.8, gamma_z=1.6,
                           build_seconds=0.1, solve_seconds=0.2, total_seconds=0.3,
                           certificate={"P": np.eye(6), "vertices": rng.normal(size=(4, 2))},
                           notes=['a "quoted" note\nwith a newline and ünïcode \\ backslash'])

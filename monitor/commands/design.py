@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
         for name in ("L", "M", "K1", "K2", "K3"):
             print(f"{name:<10} {getattr(g, name).ravel().round(6).tolist()}")
         print(f"gamma_e    {result.gamma_e:.4f}   gamma_z {result.gamma_z:.4f}   ({result.bounds_apply_to})")
-        print(f"solver     CLARABEL {result.solver_status}; build {result.build_seconds:.3f} s, "
+        print(f"solver     {result.solver_path}; build {result.build_seconds:.3f} s, "
               f"solve {result.solve_seconds:.3f} s, total {result.total_seconds:.3f} s")
         deltas = delta_summary(plant)
         print(f"delta      Lemma 1 as printed {deltas['delta_lemma1']:.4f}; exact max |F(tau)| {deltas['delta_exact']:.4f}; "

@@ -6,7 +6,7 @@ matrices alone. The Bounded Real Lemma at every vertex ``i`` of the polytope tha
 
     [[-X, 0, A_i^T X, C^T], [0, -g I, B_i^T X, 0], [X A_i, X B_i, -X, 0], [C, 0, 0, -I]] < 0,
 
-with one X for all vertices (P for ``e_f``, Q for ``y~``) proves stability and the bound ``sqrt(g)`` for
+with one X for all vertices (P for ``e_f``, Q for ``y~``, found by two separate problems) proves stability and the bound ``sqrt(g)`` for
 arbitrarily time-varying ``tau(k)``, exactly the claim ``verify`` re-checks in numpy. These blocks are
 smaller than the slack form the joint design needs (no G), so the solve is a few tens of milliseconds.
 """
@@ -19,8 +19,8 @@ import cvxpy as cp
 import numpy as np
 
 from monitor.closed_loop import Gains, closed_loop, steady_state
-from monitor.design.lmi_blocks import EPS
-from monitor.design.solve import SolveFailed, solve_problem
+from monitor.design.lmi_blocks import brl_margin
+from monitor.design.solve import EPS, Solved, SolveFailed, solve_checked
 from monitor.plant import Plant
 
 __all__ = ["Certificate", "CertificateLMI"]
@@ -34,7 +34,7 @@ class Certificate:
     gamma_z: float
     P: np.ndarray
     Q: np.ndarray
-    status: str
+    solved: Solved
 
 
 def _brl_block(X, A, B, C: np.ndarray, g) -> cp.Constraint:
@@ -51,26 +51,22 @@ def _brl_block(X, A, B, C: np.ndarray, g) -> cp.Constraint:
 
 
 class CertificateLMI:
-    """Built once per plant and polytope (cvxpy parameters), re-solved for each set of gains."""
+    """The certificate LMIs of one plant and polytope; :meth:`solve` proves the bounds of one set of gains.
+
+    Why two problems: the objective ``g_e + g_z`` is separable (P, g_e appear only in the e_f blocks; Q, g_z
+    only in the y~ blocks), so solving them apart gives the same optimum from two problems of half the
+    size. An interior-point step costs more than linearly in the size, and one part that is hard for the
+    solver no longer spoils the other. The vertices' matrices enter as constants: each problem is solved
+    once per design, and cvxpy compiles a problem with constant data several times faster than one with
+    parameters (measured: 2.7 s per compile of the parameterised form on a 4-state aircraft model).
+    """
 
     def __init__(self, plant: Plant, vertices: list[np.ndarray]) -> None:
         self.plant = plant
         self.vertices = vertices
-        N = 2 * plant.n + plant.q + plant.m
-        nw = plant.p + plant.q
         probe = closed_loop(plant, Gains.zero(plant), plant.B0,
                             steady=(np.zeros((plant.n, plant.q)), np.zeros((plant.m, plant.q))))
-        self.P = cp.Variable((N, N), symmetric=True)
-        self.Q = cp.Variable((N, N), symmetric=True)
-        self.g_e = cp.Variable(nonneg=True)
-        self.g_z = cp.Variable(nonneg=True)
-        self.A_params = [cp.Parameter((N, N)) for _ in vertices]
-        self.B_params = [cp.Parameter((N, nw)) for _ in vertices]
-        constraints = []
-        for A, B in zip(self.A_params, self.B_params):
-            constraints.append(_brl_block(self.P, A, B, probe.C_ef, self.g_e))
-            constraints.append(_brl_block(self.Q, A, B, probe.C_y, self.g_z))
-        self.problem = cp.Problem(cp.Minimize(self.g_e + self.g_z), constraints)
+        self.C_ef, self.C_y = probe.C_ef, probe.C_y
 
     def solve(self, gains: Gains) -> Certificate | None:
         """The smallest bounds one common (P, Q) proves for these gains, or None when none exists."""
@@ -78,16 +74,35 @@ class CertificateLMI:
             steady = steady_state(self.plant, gains)
         except ValueError:
             return None
-        for v, A_p, B_p in zip(self.vertices, self.A_params, self.B_params):
-            loop = closed_loop(self.plant, gains, v, steady=steady)
-            if np.max(np.abs(np.linalg.eigvals(loop.A))) >= 1.0:
-                return None  # unstable at a vertex: no certificate can exist, spare the solver
-            A_p.value = loop.A
-            B_p.value = loop.B
-        try:
-            status = solve_problem(self.problem)
-        except SolveFailed:
-            return None
-        return Certificate(gamma_e=float(np.sqrt(self.g_e.value)), gamma_z=float(np.sqrt(self.g_z.value)),
-                           P=self.P.value, Q=self.Q.value, status=status)
+        loops = [closed_loop(self.plant, gains, v, steady=steady) for v in self.vertices]
+        if any(np.max(np.abs(np.linalg.eigvals(loop.A))) >= 1.0 for loop in loops):
+            return None  # unstable at a vertex: no certificate can exist, spare the solver
+        parts = []
+        for C in (self.C_ef, self.C_y):
+            part = _common_bound(loops, C)
+            if part is None:
+                return None
+            parts.append(part)
+        (P, g_e, solved_e), (Q, g_z, solved_z) = parts
+        solved = solved_e if solved_e.margin <= solved_z.margin else solved_z  # the tighter of the two
+        if solved_e.path != solved_z.path:
+            solved = Solved(path=f"{solved_e.path} (e_f) / {solved_z.path} (y)", status=solved.status,
+                            margin=min(solved_e.margin, solved_z.margin))
+        return Certificate(gamma_e=float(np.sqrt(g_e)), gamma_z=float(np.sqrt(g_z)), P=P, Q=Q, solved=solved)
 
+
+def _common_bound(loops: list, C: np.ndarray) -> tuple[np.ndarray, float, Solved] | None:
+    """One X with the Bounded Real Lemma for output C at every vertex loop, smallest g: (X, g, how), or None."""
+    N = loops[0].A.shape[0]
+    X = cp.Variable((N, N), symmetric=True)
+    g = cp.Variable(nonneg=True)
+    problem = cp.Problem(cp.Minimize(g), [_brl_block(X, loop.A, loop.B, C, g) for loop in loops])
+
+    def claim() -> float:  # what verify re-checks: the bound at every vertex with this one X
+        return min(brl_margin(X.value, loop.A, loop.B, C, float(g.value)) for loop in loops)
+
+    try:
+        solved = solve_checked(problem, claim)
+    except SolveFailed:
+        return None
+    return X.value, float(g.value), solved

@@ -31,9 +31,9 @@ from scipy.optimize import minimize
 
 from monitor.closed_loop import Gains, closed_loop, fault_cancelling_K3, observer_indices, steady_state
 from monitor.delay_model import b0_polytope
-from monitor.design.lmi_blocks import hinf_slack_lmi
+from monitor.design.lmi_blocks import brl_margin, hinf_slack_lmi
 from monitor.design.result import DesignResult
-from monitor.design.solve import SolveFailed, solve_problem
+from monitor.design.solve import SEARCH_PATHS, Solved, SolveFailed, solve_checked
 from monitor.errors import DesignFailed
 from monitor.plant import Plant
 
@@ -51,7 +51,7 @@ class _Solution:
     Q: np.ndarray
     gamma_e: float
     gamma_z: float
-    status: str
+    solved: Solved
 
 
 class ObserverLMI:
@@ -107,20 +107,34 @@ class ObserverLMI:
             loop = closed_loop(plant, zero_obs, v, steady=steady)
             A_p.value = loop.A
             B_p.value = loop.B
+
+        def recovered() -> Gains:
+            LM = np.linalg.solve(self.G_o.value.T, self.W.value)
+            return Gains(L=LM[: plant.n], M=LM[plant.n :], K1=K1, K2=K2, K3=K3)
+
+        def claim() -> float:  # the real loop with the recovered observer, at every vertex: both bounds
+            gains = recovered()
+            worst = np.inf
+            for v in self.vertices:
+                loop = closed_loop(plant, gains, v, steady=steady)
+                worst = min(worst, brl_margin(self.P.value, loop.A, loop.B, loop.C_ef, float(self.g_e.value)),
+                            brl_margin(self.Q.value, loop.A, loop.B, loop.C_y, float(self.g_z.value)))
+            return worst
+
         try:
-            status = solve_problem(self.problem)
+            solved = solve_checked(self.problem, claim, paths=SEARCH_PATHS, retry_infeasible=False)
         except SolveFailed:
             return None
-        LM = np.linalg.solve(self.G_o.value.T, self.W.value)
+        gains = recovered()
         return _Solution(
             cost=float(self.problem.value),
-            L=LM[: plant.n],
-            M=LM[plant.n :],
+            L=gains.L,
+            M=gains.M,
             P=self.P.value,
             Q=self.Q.value,
             gamma_e=float(np.sqrt(self.g_e.value)),
             gamma_z=float(np.sqrt(self.g_z.value)),
-            status=status,
+            solved=solved,
         )
 
 
@@ -195,7 +209,7 @@ def design_certified(
         gains=gains,
         gamma_e=best.gamma_e,
         gamma_z=best.gamma_z,
-        solver_status=best.status,
+        solved=best.solved,
         build_seconds=t_build,
         solve_seconds=solve_time[0],
         total_seconds=time.perf_counter() - t0,

@@ -167,7 +167,7 @@ def design_fast(
         gains=gains,
         gamma_e=cert.gamma_e,
         gamma_z=cert.gamma_z,
-        solver_status=cert.status,
+        solved=cert.solved,
         build_seconds=t_build,
         solve_seconds=t_search + t_solve,
         total_seconds=time.perf_counter() - t0,

@@ -12,7 +12,9 @@ from __future__ import annotations
 import cvxpy as cp
 import numpy as np
 
-EPS = 1e-6
+from monitor.design.solve import EPS, most_positive_eigenvalue
+
+__all__ = ["hinf_slack_lmi", "brl_margin"]
 
 
 def hinf_slack_lmi(X, G, GA, GB, C: np.ndarray, g) -> cp.Constraint:
@@ -30,3 +32,22 @@ def hinf_slack_lmi(X, G, GA, GB, C: np.ndarray, g) -> cp.Constraint:
     )
     size = 2 * N + nw + k
     return 0.5 * (block + block.T) << -EPS * np.eye(size)
+
+
+def brl_margin(X: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray, g: float) -> float:
+    """What either LMI form claims, re-evaluated in numpy: the margin of ``X > 0`` and of the Bounded Real Lemma
+
+        [[A^T X A - X, A^T X B, C^T], [B^T X A, B^T X B - g I, 0], [C, 0, -I]] < 0
+
+    for the closed loop ``(A, B, C)`` built from the *recovered* gains. Both the slack form above and the
+    plain form of ``monitor.design.certificate`` posed with ``<= -EPS I`` imply this matrix ``<= -EPS I``
+    (a congruence with a matrix whose Gram is ``>= I``), and ``X >= EPS I``; so a point the solver really
+    solved has margin ``>= EPS``, and stability plus the bound ``sqrt(g)`` follow from any positive margin.
+    """
+    N, nw, k = A.shape[0], B.shape[1], C.shape[0]
+    M = np.block([
+        [A.T @ X @ A - X, A.T @ X @ B, C.T],
+        [B.T @ X @ A, B.T @ X @ B - g * np.eye(nw), np.zeros((nw, k))],
+        [C, np.zeros((k, nw)), -np.eye(k)],
+    ])
+    return min(-most_positive_eigenvalue(-X), -most_positive_eigenvalue(M))

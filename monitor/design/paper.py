@@ -18,9 +18,9 @@ import cvxpy as cp
 import numpy as np
 
 from monitor.closed_loop import Gains
-from monitor.design.lmi_blocks import hinf_slack_lmi
+from monitor.design.lmi_blocks import brl_margin, hinf_slack_lmi
 from monitor.design.result import DesignResult
-from monitor.design.solve import SolveFailed, solve_problem
+from monitor.design.solve import SolveFailed, solve_checked
 from monitor.errors import DesignFailed
 from monitor.plant import Plant
 
@@ -76,17 +76,26 @@ def design_paper(plant: Plant, weight_y: float = 0.1, **_ignored) -> DesignResul
         G1.T @ B0 == B0 @ G1_hat,
     ]
     problem = cp.Problem(cp.Minimize(g_e + weight_y * g_z), constraints)
+    K2, K3 = lemma3_K2_K3(plant)
+
+    def recovered() -> Gains:
+        LM = np.linalg.solve(G23.value.T, Y.value)
+        return Gains(L=LM[:n], M=LM[n:], K1=np.linalg.solve(G1_hat.value, X.value), K2=K2, K3=K3)
+
+    def claim() -> float:  # model (9) with the recovered L, M, K1: stable with both bounds
+        g = recovered()
+        A_bar = np.block([[A + B0 @ g.K1 @ C, Z((n, n)), Df], [Z((n, n)), A - g.L @ C, Df], [Z((q, n)), -g.M @ C, np.eye(q)]])
+        return min(brl_margin(P.value, A_bar, B_bar, C_f, float(g_e.value)),
+                   brl_margin(Q.value, A_bar, B_bar, C_bar, float(g_z.value)))
+
     t_build = time.perf_counter() - t0
     ts = time.perf_counter()
     try:
-        status = solve_problem(problem)
+        solved = solve_checked(problem, claim)
     except SolveFailed as exc:
         raise DesignFailed(f"paper method (Theorem 1, repaired): {exc}; no gains written") from None
     t_solve = time.perf_counter() - ts
-    LM = np.linalg.solve(G23.value.T, Y.value)
-    K1 = np.linalg.solve(G1_hat.value, X.value)
-    K2, K3 = lemma3_K2_K3(plant)
-    gains = Gains(L=LM[:n], M=LM[n:], K1=K1, K2=K2, K3=K3)
+    gains = recovered()
     rank_b1 = np.linalg.matrix_rank(np.hstack([B0, plant.B1]))
     rank_df = np.linalg.matrix_rank(np.hstack([B0, Df]))
     return DesignResult(
@@ -94,7 +103,7 @@ def design_paper(plant: Plant, weight_y: float = 0.1, **_ignored) -> DesignResul
         gains=gains,
         gamma_e=float(np.sqrt(g_e.value)),
         gamma_z=float(np.sqrt(g_z.value)),
-        solver_status=status,
+        solved=solved,
         build_seconds=t_build,
         solve_seconds=t_solve,
         total_seconds=time.perf_counter() - t0,

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monitor.closed_loop import Gains
+from monitor.design.solve import Solved
 
 
 @dataclass
@@ -17,7 +18,6 @@ class DesignResult:
     gains: Gains
     gamma_e: float
     gamma_z: float
-    solver_status: str
     build_seconds: float
     solve_seconds: float
     total_seconds: float
@@ -26,3 +26,9 @@ class DesignResult:
     bounds_apply_to: str = "real closed loop, every tau in the interval, time-varying"
     objective: str | None = None  # certified designs: "fast" or "hinf"
     max_losses: int = 0  # the certificate also covers every pattern with at most this many consecutive losses
+    solved: Solved | None = None  # how the design's last LMI was solved and checked; None: no LMI (hand-written gains)
+
+    @property
+    def solver_path(self) -> str:
+        """One line for reports: the path that produced the accepted point and its check, or that none was solved."""
+        return self.solved.describe() if self.solved is not None else "no LMI solved"

@@ -80,7 +80,7 @@ def design_robust_separate(plant: Plant, **_ignored) -> DesignResult:
     t0 = time.perf_counter()
     vertices = b0_polytope(plant)
     mismatch = [OBSERVER_MISMATCH_WEIGHT * (v - plant.B0) for v in vertices]
-    L, M, gamma_e, status = observer_alone(plant, mismatch)
+    L, M, gamma_e, solved = observer_alone(plant, mismatch, method="robust-separate")
     t_obs = time.perf_counter() - t0
     K1, K2, gamma_z = robust_controller_alone(plant, vertices)
     return DesignResult(
@@ -88,7 +88,7 @@ def design_robust_separate(plant: Plant, **_ignored) -> DesignResult:
         gains=Gains(L=L, M=M, K1=K1, K2=K2, K3=fault_cancelling_K3(plant, K2)),
         gamma_e=gamma_e,
         gamma_z=gamma_z,
-        solver_status=status,
+        solved=solved,
         build_seconds=0.0,
         solve_seconds=t_obs,
         total_seconds=time.perf_counter() - t0,

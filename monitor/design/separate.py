@@ -18,9 +18,9 @@ import numpy as np
 from scipy.optimize import minimize
 
 from monitor.closed_loop import Gains, fault_cancelling_K3
-from monitor.design.lmi_blocks import hinf_slack_lmi
+from monitor.design.lmi_blocks import brl_margin, hinf_slack_lmi
 from monitor.design.result import DesignResult
-from monitor.design.solve import SolveFailed, solve_problem
+from monitor.design.solve import Solved, SolveFailed, solve_checked
 from monitor.errors import DesignFailed
 from monitor.plant import Plant
 from monitor.verify import hinf_norm
@@ -28,8 +28,9 @@ from monitor.verify import hinf_norm
 __all__ = ["design_separate", "observer_alone", "controller_alone"]
 
 
-def observer_alone(plant: Plant, extra_inputs: list[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, float, str]:
-    """H-infinity-optimal (L, M) of the error system alone; returns L, M, gamma_e, solver status.
+def observer_alone(plant: Plant, extra_inputs: list[np.ndarray] | None = None,
+                   method: str = "separate") -> tuple[np.ndarray, np.ndarray, float, Solved]:
+    """H-infinity-optimal (L, M) of the error system alone; returns L, M, gamma_e and how the LMI was solved.
 
     ``extra_inputs``: further n x k input matrices of ``e_x`` to be robust against, one LMI each with the
     same Lyapunov and slack matrices (the robust separate design passes the vertices of ``B0(tau) - B0``,
@@ -45,13 +46,21 @@ def observer_alone(plant: Plant, extra_inputs: list[np.ndarray] | None = None) -
     Y = cp.Variable((n + q, l))  # Y = G^T [L; M]
     g = cp.Variable(nonneg=True)
     inputs = [B_o] if not extra_inputs else [np.hstack([B_o, np.vstack([E, np.zeros((q, E.shape[1]))])]) for E in extra_inputs]
-    problem = cp.Problem(cp.Minimize(g), [hinf_slack_lmi(X, G, G.T @ A_o - Y @ C_o, G.T @ B, C_f, g) for B in inputs])
+    problem = cp.Problem(cp.Minimize(g), [*(hinf_slack_lmi(X, G, G.T @ A_o - Y @ C_o, G.T @ B, C_f, g) for B in inputs)])
+
+    def recovered() -> np.ndarray:
+        return np.linalg.solve(G.value.T, Y.value)
+
+    def claim() -> float:  # the error system with the recovered (L, M): stable, and ||w -> e_f|| <= sqrt(g)
+        A_cl = A_o - recovered() @ C_o
+        return min(brl_margin(X.value, A_cl, B, C_f, float(g.value)) for B in inputs)
+
     try:
-        status = solve_problem(problem)
+        solved = solve_checked(problem, claim)
     except SolveFailed as exc:
-        raise DesignFailed(f"separate method, observer LMI: {exc}; no gains written") from None
-    LM = np.linalg.solve(G.value.T, Y.value)
-    return LM[:n], LM[n:], float(np.sqrt(g.value)), status
+        raise DesignFailed(f"{method} method, observer LMI: {exc}; no gains written") from None
+    LM = recovered()
+    return LM[:n], LM[n:], float(np.sqrt(g.value)), solved
 
 
 def _controller_loop(plant: Plant, K1: np.ndarray, K2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -87,7 +96,7 @@ def controller_alone(plant: Plant, max_evaluations: int = 200) -> tuple[np.ndarr
 
 def design_separate(plant: Plant, **_ignored) -> DesignResult:
     t0 = time.perf_counter()
-    L, M, gamma_e, status = observer_alone(plant)
+    L, M, gamma_e, solved = observer_alone(plant)
     t_obs = time.perf_counter() - t0
     K1, K2, gamma_z = controller_alone(plant)
     gains = Gains(L=L, M=M, K1=K1, K2=K2, K3=fault_cancelling_K3(plant, K2))
@@ -96,7 +105,7 @@ def design_separate(plant: Plant, **_ignored) -> DesignResult:
         gains=gains,
         gamma_e=gamma_e,
         gamma_z=gamma_z,
-        solver_status=status,
+        solved=solved,
         build_seconds=0.0,
         solve_seconds=t_obs,
         total_seconds=time.perf_counter() - t0,

@@ -108,7 +108,7 @@ def test_a_second_airframe_whose_C_reads_alpha_and_q(tmp_path: Path) -> None:
     gains = Gains(L=plant.A.copy(), M=0.5 * np.linalg.pinv(plant.Df), K1=np.array([[-0.05, 0.0]]),
                   K2=np.zeros((1, 1)), K3=np.array([[-0.5]]))
     gains_path = tmp_path / "gains.toml"
-    write_gains(gains_path, DesignResult(method="hand", gains=gains, gamma_e=0.0, gamma_z=0.0, solver_status="n/a",
+    write_gains(gains_path, DesignResult(method="hand", gains=gains, gamma_e=0.0, gamma_z=0.0,
                                          build_seconds=0, solve_seconds=0, total_seconds=0), plant)
     peer = PeerVehicle(plant, sysid=5, seed=3, outputs="alpha+q")
     port = free_udp_port()
