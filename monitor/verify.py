@@ -21,7 +21,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.optimize import linprog, minimize_scalar
+from scipy.optimize import linprog
 
 from monitor.closed_loop import Gains, LoopMatrices, closed_loop, steady_state
 from monitor.delay_model import b0_of_tau, tau_grid
@@ -65,10 +65,21 @@ def hinf_norm(A: np.ndarray, B: np.ndarray, C: np.ndarray, points: int = 2048) -
     omegas = np.concatenate([np.linspace(0.0, np.pi, points), np.geomspace(1e-5, 1e-1, 200)])
     values = gain(omegas)
     i = int(np.argmax(values))
+    best = float(values[i])
     step = np.pi / (points - 1)
     lo, hi = max(omegas[i] - step, 0.0), min(omegas[i] + step, np.pi)
-    res = minimize_scalar(lambda w: -gain(w)[0], bounds=(lo, hi), method="bounded", options={"xatol": 1e-9})
-    return float(max(values[i], -res.fun))
+    # Refine the peak by zooming: each level evaluates 17 frequencies in one batched solve and keeps the two
+    # grid steps around the best one (1/8 of the bracket), so 7 levels locate it to about 1e-7 of a sweep step.
+    # One batched call per level instead of a scalar search's ~30 single-frequency calls: the design searches
+    # call this thousands of times.
+    for _ in range(7):
+        grid = np.linspace(lo, hi, 17)
+        level = gain(grid)
+        j = int(np.argmax(level))
+        best = max(best, float(level[j]))
+        width = (hi - lo) / 16
+        lo, hi = max(grid[j] - width, 0.0), min(grid[j] + width, np.pi)
+    return best
 
 
 def _loops(plant: Plant, gains: Gains, taus: np.ndarray, steady) -> list[LoopMatrices]:
