@@ -1,17 +1,26 @@
-"""The demo's pieces without daemons: the Monte-Carlo's actuator, Fig. 5's steady state, the design list."""
+"""The demo's pieces without daemons: the Monte-Carlo's actuator, Fig. 5's steady state, the design list,
+and a demo that survives a failed baseline design (the live run replaced by the same scenario simulated)."""
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
+import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from monitor.closed_loop import steady_state
 from monitor.demo import montecarlo
+from monitor.demo.live import Scenario
 from monitor.demo.methods import METHODS, look
+from monitor.demo.orchestrate import DemoOptions, Designed, Flown, run_demo
+from monitor.demo.report import Row, format_table
 from monitor.demo.steady import held_output_steady_state, q_caption
-from monitor.errors import UserError
+from monitor.design.result import DesignResult
+from monitor.errors import DesignFailed, UserError, run_cli_command
+from monitor.plant import Plant, load_plant
 from monitor.wire.specs import parse_delay_spec, parse_fault_spec
 from sim_vehicle.wind import parse_wind_spec
 from tests.designs import designed
@@ -60,3 +69,71 @@ def test_designs_are_one_list_and_any_name_gets_a_distinct_look():
     looks = [look(m) for m in METHODS]
     assert len({(s.colour, s.line) for s in looks}) == len(METHODS)
     assert look("some-future-design") not in looks
+
+
+FIGURES = ("fig3_fault_estimate.png", "fig4_alpha.png", "fig5_q.png", "overview.png")
+SHORT = Scenario(steps=40, fault="bias:2@10")
+
+
+def _failing(*broken: str):
+    """The project's designs (computed once per session), except that ``broken`` fail as on the issue's machine."""
+    def design(method: str, plant: Plant) -> DesignResult:
+        if method in broken:
+            raise DesignFailed(f"{method} method, observer LMI: solver status optimal_inaccurate;\nno gains written")
+        return designed(SHORT.plant, method)[1]
+    return design
+
+
+def _fly_in_simulation(d: Designed, scenario: Scenario, out: Path, progress) -> Flown:
+    """The live run's stand-in: the same scenario simulated (no daemons, no sockets), scored the same way."""
+    plant = load_plant(scenario.plant)
+    trace, s = montecarlo.run_scenario(plant, d.gains.gains, scenario.steps, scenario.fault, scenario.delay,
+                                       scenario.wind, scenario.seed)
+    row = Row(d.method, d.stable, d.certificate, d.claim("gamma_e"), d.claim("gamma_z"), samples=int(trace.k.size),
+              settling_steps=s.settling_steps, rms_ef=s.rms_ef, peak_alpha_after=s.peak_alpha_after,
+              rms_alpha_after=s.rms_alpha_after, alarm_delay=None, false_alarms=0)
+    return Flown(row, trace, {"simulated": True})
+
+
+def test_a_failed_baseline_design_is_a_row_and_the_demo_goes_on(tmp_path, capsys):
+    options = DemoOptions(scenario=SHORT, out=str(tmp_path))
+    assert run_demo(options, design=_failing("separate"), fly=_fly_in_simulation) == 0
+
+    rows = {r["method"]: r for r in json.loads((tmp_path / "summary.json").read_text())["rows"]}
+    assert list(rows) == list(METHODS)  # every design has its row, in the table's order
+    failed = rows["separate"]
+    assert failed["failure"] == ("design failed: separate method, observer LMI: solver status optimal_inaccurate; "
+                                 "no gains written")  # one line
+    assert failed["stable"] is None and failed["samples"] is None  # no verdict, no run: nothing made up
+    for m in ("certified", "robust-separate", "paper"):
+        assert rows[m]["failure"] is None and rows[m]["stable"] is True and rows[m]["samples"] == SHORT.steps
+    assert rows["certified"]["certificate"] == "valid"
+    for name in FIGURES:
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not (tmp_path / "gains" / "separate.toml").exists()  # a failed design writes no gains
+
+    out, err = capsys.readouterr()
+    assert "\nseparate         design failed: separate method, observer LMI" in out  # the table's row
+    assert "Failed:     separate (no gains, no verdict, no run): design failed: separate method" in out
+    assert "fault-monitor demo: WARNING: the separate baseline failed" in err
+
+
+def test_a_failed_certified_design_fails_the_demo_after_writing_the_rest(tmp_path, capsys):
+    options = DemoOptions(scenario=SHORT, out=str(tmp_path), methods=("certified", "separate"), runs=2)
+    args = argparse.Namespace(command="demo", func=lambda _: run_demo(options, design=_failing("certified")))
+    assert run_cli_command("fault-monitor", args) == DesignFailed.exit_code == 3  # as `fault-monitor design` exits
+
+    results = json.loads((tmp_path / "montecarlo.json").read_text())["results"]
+    assert results["certified"]["failure"].startswith("design failed: certified method")
+    assert results["separate"]["runs"] == 2 and results["separate"]["stable"] is False  # the baseline still ran
+    out, err = capsys.readouterr()
+    assert "\ncertified       design failed: certified method" in out
+    assert "fault-monitor demo: error: certified method, observer LMI: solver status optimal_inaccurate" in err
+
+
+def test_a_failed_row_widens_no_column():
+    ran = Row("certified", True, "valid", 2.24, 2.19, 100, 2, 0.316, 0.63, 0.153, 3, 0)
+    alone = format_table([ran]).splitlines()
+    table = format_table([ran, Row.failed("robust-separate", "design failed: " + "x" * 200)]).splitlines()
+    assert len(table[1]) == len(alone[1]) + len("robust-separate") - len("certified")  # only the name column grew
+    assert table[3] == "robust-separate  design failed: " + "x" * 200

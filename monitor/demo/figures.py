@@ -5,6 +5,8 @@ at the actuator limit) would otherwise squash every other curve to a flat line; 
 clipped, and its legend entry says so. Why the legend sits outside the axes and every design has its own
 line style and staggered markers: after the fault is compensated several designs lie on the same value,
 and a legend box or a solid line on top would hide a trace (the certified one was hidden from k = 62).
+Why a design that could not be designed still has a legend entry (no curve): a reader comparing with the
+README's figures sees that it is missing on purpose, not lost.
 """
 
 from __future__ import annotations
@@ -46,7 +48,7 @@ def _limits(series: list[np.ndarray], floor: float) -> tuple[float, float]:
 
 
 def _panel(ax, runs: dict[str, Trace], panel: Panel, onset: int | None, title: str, unstable: frozenset[str],
-           xlabel: bool = True) -> None:
+           xlabel: bool = True, failed: tuple[str, ...] = ()) -> None:
     stable = [getattr(t, panel.field) for name, t in runs.items() if name not in unstable]
     series = stable or [getattr(t, panel.field) for t in runs.values()]
     if panel.truth:
@@ -67,6 +69,10 @@ def _panel(ax, runs: dict[str, Trace], panel: Panel, onset: int | None, title: s
                 marker="" if faint else style.marker, ms=4, markevery=(i % every, every),
                 alpha=0.45 if faint else 1.0, zorder=1 if faint else 3,
                 label=f"{name}{' (unstable loop: clipped)' if left else ''}")
+    for name in failed:
+        style = look(name)
+        ax.plot([], [], color=style.colour, ls=style.line, marker=style.marker, ms=4, alpha=0.45,
+                label=f"{name} (design failed: not run)")
     if onset is not None:
         ax.axvline(onset, color="grey", ls="--", lw=1)
         ax.annotate(f"fault onset k = {onset}", (onset, hi), xytext=(4, -14), textcoords="offset points", fontsize=8,
@@ -84,10 +90,12 @@ def _panel(ax, runs: dict[str, Trace], panel: Panel, onset: int | None, title: s
 
 
 def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subtitle: str,
-                  unstable: frozenset[str] = frozenset(), q_caption: str = "", q_steady: float | None = None) -> list[Path]:
+                  unstable: frozenset[str] = frozenset(), q_caption: str = "", q_steady: float | None = None,
+                  failed: tuple[str, ...] = ()) -> list[Path]:
     """Write fig3_fault_estimate.png, fig4_alpha.png, fig5_q.png and an overview; return their paths.
 
-    ``q_caption`` and ``q_steady`` (``monitor.demo.steady.q_caption``) explain Fig. 5's pitch-rate offset.
+    ``q_caption`` and ``q_steady`` (``monitor.demo.steady.q_caption``) explain Fig. 5's pitch-rate offset;
+    ``failed`` names designs that have no run, listed in the legend as such. ``runs`` must not be empty.
     """
     import matplotlib
 
@@ -105,14 +113,14 @@ def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subt
     paths = []
     for panel in panels:
         fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
-        _panel(ax, runs, panel, onset, f"{panel.title}\n{subtitle}", unstable)
+        _panel(ax, runs, panel, onset, f"{panel.title}\n{subtitle}", unstable, failed=failed)
         path = out_dir / panel.file
         fig.savefig(path, bbox_inches="tight")
         plt.close(fig)
         paths.append(path)
     fig, axes = plt.subplots(len(panels), 1, figsize=(10, 10), dpi=100, sharex=True)
     for i, (ax, panel) in enumerate(zip(axes, panels)):
-        _panel(ax, runs, panel, onset, panel.title, unstable, xlabel=i == len(panels) - 1)
+        _panel(ax, runs, panel, onset, panel.title, unstable, xlabel=i == len(panels) - 1, failed=failed)
     fig.suptitle(subtitle, fontsize=9)
     fig.tight_layout()
     path = out_dir / "overview.png"

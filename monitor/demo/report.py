@@ -18,19 +18,31 @@ SETTLING_FLOOR = 2  # a floor: f(20) first reaches y(21), so no observer of form
 
 @dataclass
 class Row:
+    """One design's line of the comparison; a design that could not be designed has only ``failure``.
+
+    Why the measurements may be None rather than made up: a failed design has no run, and summary.json
+    must not show a verdict (``stable: false``) or figures nobody measured.
+    """
+
     method: str
-    stable: bool
-    certificate: str
-    gamma_e: float
-    gamma_z: float
-    samples: int
+    stable: bool | None
+    certificate: str | None
+    gamma_e: float | None
+    gamma_z: float | None
+    samples: int | None
     settling_steps: int | None
     rms_ef: float | None
     peak_alpha_after: float | None
     rms_alpha_after: float | None
     alarm_delay: int | None
-    false_alarms: int
+    false_alarms: int | None
     tau_true_p50: float | None = None
+    failure: str | None = None  # why this design has no run ("design failed: ..."); None when it ran
+
+    @classmethod
+    def failed(cls, method: str, failure: str) -> Row:
+        """The row of a design that never ran: its name and why, every measurement None."""
+        return cls(method, None, None, None, None, None, None, None, None, None, None, None, failure=failure)
 
 
 def trace_from_recording(rrd: Path, fault_spec: str) -> tuple[Trace, dict]:
@@ -81,13 +93,22 @@ def _fmt(value, spec: str = ".3f", none: str = "never") -> str:
     return format(value, spec)
 
 
+def _cells(r: Row) -> list[str]:
+    """A row's cells; a failed design has two, its name and why, the reason running on over the empty columns."""
+    if r.failure is not None:
+        return [r.method, r.failure]
+    return [r.method, "stable" if r.stable else "UNSTABLE", r.certificate, _fmt(r.gamma_e), _fmt(r.gamma_z),
+            str(r.samples), _fmt(r.settling_steps, "d"), _fmt(r.rms_ef, ".3g"), _fmt(r.peak_alpha_after, ".3g"),
+            _fmt(r.rms_alpha_after, ".3g"), _fmt(r.alarm_delay, "d"), str(r.false_alarms)]
+
+
 def format_table(rows: list[Row]) -> str:
     head = ["design", "real loop", "certificate", "gamma_e", "gamma_z", "samples",
             f"FE settling, samples (floor {SETTLING_FLOOR})", "RMS e_f after onset", "peak |alpha| after, deg", "RMS alpha after, deg",
             "alarm delay, samples", "false alarms"]
-    body = [[r.method, "stable" if r.stable else "UNSTABLE", r.certificate, _fmt(r.gamma_e), _fmt(r.gamma_z),
-             str(r.samples), _fmt(r.settling_steps, "d"), _fmt(r.rms_ef, ".3g"), _fmt(r.peak_alpha_after, ".3g"),
-             _fmt(r.rms_alpha_after, ".3g"), _fmt(r.alarm_delay, "d"), str(r.false_alarms)] for r in rows]
-    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
+    body = [_cells(r) for r in rows]
+    # a failed row's reason spans the measurement columns, so it widens none of them (only its name counts)
+    widths = [max([len(h), *(len(b[i]) for b in body if len(b) == len(head) or i == 0)])
+              for i, h in enumerate(head)]
     line = lambda cells: "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()  # noqa: E731
     return "\n".join([line(head), line(["-" * w for w in widths]), *(line(b) for b in body)])
