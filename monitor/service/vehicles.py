@@ -8,9 +8,14 @@ table each with ``plant``, ``gains`` and optionally ``signals``) or else from th
 Messages go to the vehicle's ``SampleAssembler`` (monitor/link/assembly.py), which hands back whole
 samples in order; duplicates and stale samples are counted there. Why a "restart" rule: a vehicle
 process restarted under the same sysid comes from a new source and starts again at a low k, which would
-otherwise look stale until the timeout; an instant message from a new route whose k goes backwards
-while the old route has been silent for ``restart_silence`` seconds starts a fresh state. A replayed
-old message from another address while the vehicle is live does not qualify and is still stale.
+otherwise look stale until the timeout. A new route may take over once the old one has been silent for
+``restart_silence`` seconds (or its TCP connection closed); from that takeover until the new route's
+first sample, any message with a time field (of any message the signal map uses, not only the instant)
+whose k is below the old run's last k, or beyond where its clock can be, is a restart: a fresh estimator
+and a new ``run`` in the recording. Why until the first sample and not only on the first message: a
+restarted vehicle often speaks first with a HEARTBEAT, which has no time to judge; the takeover is
+remembered and the first timed message decides. A replayed old message from another address while the
+vehicle is live does not qualify and is still refused (``foreign_source``).
 
 Why a vehicle that never assembles a sample gets a WARNING: the most common set-up mistake is a signal
 map that names a message the vehicle does not send; a silent monitor would look like a network fault.
@@ -148,7 +153,7 @@ class Vehicle:
     __slots__ = ("sysid", "model", "state", "alarm", "delay", "assembler", "route", "last_seen", "first_seen",
                  "processed", "skipped", "warned_missing", "last_command", "last_command_k", "no_report", "rejected",
                  "last_reject_log", "applied", "commands_effective", "not_applied", "last_sample_at", "run",
-                 "future_since")
+                 "future_since", "taken_over")
 
     def __init__(self, sysid: int, model: VehicleModel, alarm: AlarmConfig, route: object, now: float,
                  observe: bool, wait_s: float, run: int = 0) -> None:
@@ -170,6 +175,7 @@ class Vehicle:
         self.commands_effective = True
         self.last_sample_at: float | None = None
         self.future_since: float | None = None
+        self.taken_over = False  # a new route took over after silence and has not given a sample yet
 
 
 @dataclass
@@ -250,8 +256,9 @@ class VehicleTable:
 
         Who may speak for a vehicle: the link and peer it is bound to. While that source is live
         (heard within ``restart_silence``), the same sysid from anywhere else is refused and counted; after
-        that silence, or at once when the bound TCP connection closed, a new source takes over (a restart when
-        its k goes backwards: fresh estimator).
+        that silence, or at once when the bound TCP connection closed, a new source takes over. Until the new
+        source's first sample, a timed message whose k goes backwards (or beyond where the clock can be) is
+        a restart (fresh estimator, next run), whichever message it is and whatever came before it.
         """
         vehicle = self.vehicles.get(sysid)
         if vehicle is None:
@@ -265,15 +272,18 @@ class VehicleTable:
         # where the vehicle's clock can be: only worth working out for a stamp beyond the usual slack
         max_k = (self._max_k(vehicle, now) if last_k is not None and k is not None and k > last_k + FUTURE_SLACK
                  else None)
-        if route != vehicle.route:
-            if now - vehicle.last_seen < self.restart_silence and _alive(vehicle.route):
-                self.counters.foreign_source += 1
-                return []
-            if instant and k is not None and asm.last_k is not None and (k < asm.last_k or (max_k and k > max_k)):
-                return self._restart(vehicle, name, values, route, now, "new source", k)
+        new_route = route != vehicle.route
+        if new_route and now - vehicle.last_seen < self.restart_silence and _alive(vehicle.route):
+            self.counters.foreign_source += 1
+            return []
+        if ((new_route or vehicle.taken_over) and k is not None and last_k is not None
+                and (k < last_k or (max_k is not None and k > max_k))):
+            return self._restart(vehicle, name, values, route, now, "new source", k)
+        if new_route:
             log.info("vehicle sysid %d now speaks from %s (was %s, silent %.1f s)", sysid, _where(route),
                      _where(vehicle.route), now - vehicle.last_seen)
             vehicle.route = route
+            vehicle.taken_over = True
         if max_k is not None and k is not None and k > max_k and instant:
             # beyond where its clock can be: refused (the assembler counts it); but a clock that really jumped
             # keeps stamping from there while no ordinary sample comes: after CLOCK_JUMP_S it is believed
@@ -326,6 +336,8 @@ class VehicleTable:
         values = sample.values
         vehicle.last_sample_at = now if now is not None else vehicle.last_seen
         vehicle.future_since = None
+        if sample.route == vehicle.route:
+            vehicle.taken_over = False  # the new route's clock went on from the old one's: no restart to come
         reason = sig.reject_reason(values)
         if reason is not None:
             vehicle.rejected += 1
