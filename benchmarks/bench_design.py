@@ -16,7 +16,7 @@ import cvxpy  # noqa: E402,F401
 IMPORT_S = time.perf_counter() - t0
 
 from monitor.design import run_design  # noqa: E402
-from monitor.plant import load_plant  # noqa: E402
+from monitor.model.plant import load_plant  # noqa: E402
 
 
 DESIGNS = (

@@ -68,10 +68,10 @@ def bench_plant(directory: Path) -> tuple[Path, Path]:
     """paper-continuous at 50 Hz and deadbeat observer gains for it (files in ``directory``)."""
     import numpy as np
 
-    from monitor.closed_loop import Gains
+    from monitor.model.closed_loop import Gains
     from monitor.design.result import DesignResult
     from monitor.gains import write_gains
-    from monitor.plant import load_plant, parse_plant
+    from monitor.model.plant import load_plant, parse_plant
 
     text = (REPO / "monitor/presets/paper-continuous.toml").read_text()
     text = text.replace("h = 1.0", f"h = {H}").replace("tau_max = 0.4612", f"tau_max = {0.4612 * H}")

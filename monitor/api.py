@@ -31,12 +31,12 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from monitor.closed_loop import Gains
+from monitor.model.closed_loop import Gains
 from monitor.demo.montecarlo import Trace
 from monitor.design.result import DesignResult
 from monitor.errors import UserError
-from monitor.plant import Plant, load_plant, plant_from_table
-from monitor.verify import Verdict
+from monitor.model.plant import Plant, load_plant, plant_from_table
+from monitor.checks.verify import Verdict
 
 __all__ = ["Gains", "Plant", "DesignResult", "Verdict", "SimulatedRun", "load_plant", "plant_from_arrays",
            "plant_from_statespace", "design_gains", "check_gains", "check_losses", "simulate", "read_gains",
@@ -131,14 +131,14 @@ def design_gains(plant: Plant, method: str = "certified", objective: str | None 
 def check_gains(plant: Plant, gains: Gains, result: DesignResult | None = None) -> Verdict:
     """``fault-monitor verify``: the real loop judged from the plant and gains alone (``result`` adds its claims).
 
-    >>> from monitor.closed_loop import Gains
+    >>> from monitor.model.closed_loop import Gains
     >>> import numpy as np
     >>> published = Gains(L=np.array([[0.0124], [-0.0008]]), M=np.array([[0.8486]]), K1=np.array([[-11.2657]]),
     ...                   K2=np.array([[-1.360]]), K3=np.array([[-0.607]]))
     >>> check_gains(load_plant("paper"), published).stable   # the paper's own gains
     False
     """
-    from monitor.verify import verify_gains
+    from monitor.checks.verify import verify_gains
 
     if result is None:
         return verify_gains(plant, gains)
@@ -146,8 +146,8 @@ def check_gains(plant: Plant, gains: Gains, result: DesignResult | None = None) 
 
 
 def check_losses(plant: Plant, gains: Gains, max_losses: int, result: DesignResult | None = None):
-    """``verify --max-losses N``'s loss verdict (``stable`` True only with a proof; see monitor.verify_losses)."""
-    from monitor.verify_losses import verify_losses
+    """``verify --max-losses N``'s loss verdict (``stable`` True only with a proof; see monitor.checks.verify_losses)."""
+    from monitor.checks.verify_losses import verify_losses
 
     return verify_losses(plant, gains, max_losses, result.certificate if result else None)
 

@@ -17,10 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from monitor.closed_loop import Gains
+from monitor.model.closed_loop import Gains
 from monitor.design.result import DesignResult
 from monitor.errors import UserError
-from monitor.plant import Plant
+from monitor.model.plant import Plant
 
 __all__ = ["GainsFile", "write_gains", "read_gains", "parse_gain_matrix"]
 

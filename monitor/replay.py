@@ -7,7 +7,7 @@ rows is a small, exact inverse of what the recorder wrote.
 
 Where the fault comes from, in order: the truth stream recorded beside the estimates (``truth/f``),
 else a fault SPEC given by the caller (``--fault bias:2@20``), else nothing (then settling and the
-estimation error are ``None``). The scores are those of ``monitor.metrics`` on the fault's first
+estimation error are ``None``). The scores are those of ``monitor.checks.metrics`` on the fault's first
 component (the elevator fault).
 """
 
@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from monitor import metrics
+from monitor.checks import metrics
 from monitor.errors import UserError
 from monitor.service.recorder import (
     PROPERTY_NAME,

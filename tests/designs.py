@@ -7,7 +7,7 @@ from functools import lru_cache
 
 from monitor.design import run_design
 from monitor.design.result import DesignResult
-from monitor.plant import Plant, load_plant
+from monitor.model.plant import Plant, load_plant
 
 
 @lru_cache(maxsize=None)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from monitor.link.signals import default_signal_map
-from monitor.plant import load_plant
+from monitor.model.plant import load_plant
 from monitor.service.alarm import AlarmConfig
 from monitor.service.offline import analyse_log
 from monitor.service.vehicles import Fleet, load_model
@@ -62,7 +62,7 @@ def _write_flight(path: Path, plant, seed: int = 0, garbage: bool = True) -> dic
 @pytest.fixture(scope="module")
 def gains(tmp_path_factory) -> Path:
     """The fault-direction deadbeat observer (L = (A+I) Df / (C Df), M = 1 / (C Df)): observe-only needs no K."""
-    from monitor.closed_loop import Gains
+    from monitor.model.closed_loop import Gains
     from monitor.design.result import DesignResult
     from monitor.gains import write_gains
 

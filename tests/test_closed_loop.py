@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monitor.closed_loop import Gains, closed_loop, fault_cancelling_K3, steady_state
-from monitor.delay_model import b0_of_tau, b0_polytope, input_sum, tau_grid
-from monitor.estimator import Estimator
-from monitor.plant import load_plant
+from monitor.model.closed_loop import Gains, closed_loop, fault_cancelling_K3, steady_state
+from monitor.model.delay_model import b0_of_tau, b0_polytope, input_sum, tau_grid
+from monitor.model.estimator import Estimator
+from monitor.model.plant import load_plant
 
 GAINS = dict(L=np.array([[1.87], [1.63]]), M=np.array([[6.9]]), K1=np.array([[-0.23]]), K2=np.array([[0.76]]))
 
@@ -60,6 +60,25 @@ def test_polytope_contains_the_whole_delay_curve(preset):
         pt = b0_of_tau(p, float(t)).ravel()
         res = linprog(np.zeros(len(V)), A_eq=np.vstack([V.T, np.ones((1, len(V)))]), b_eq=np.append(pt, 1), bounds=[(0, None)] * len(V))
         assert res.status == 0, f"B0({t}) outside the polytope"
+
+
+def test_the_prism_holds_every_point_of_a_thin_cloud_with_2_dim_vertices():
+    """The 4-state aircraft case: a nearly straight curve in R^4, blown up into cross-polytopes."""
+    from scipy.optimize import linprog
+
+    from monitor.model.delay_model import _oriented_prism
+
+    rng = np.random.default_rng(4)
+    for dim in (3, 4, 5):
+        direction = rng.normal(size=dim)
+        curve = np.array([t * direction + 1e-3 * t**2 * rng.normal(size=dim) for t in np.linspace(0, 1, 9)])
+        cloud = np.array([pt + s * 1e-4 * e for pt in curve for e in np.eye(dim) for s in (1.0, -1.0)])
+        V = _oriented_prism(cloud)
+        assert len(V) <= 2 * dim
+        for pt in cloud:
+            res = linprog(np.zeros(len(V)), A_eq=np.vstack([V.T, np.ones((1, len(V)))]), b_eq=np.append(pt, 1),
+                          bounds=[(0, None)] * len(V))
+            assert res.status == 0, f"a cloud point outside the prism (dim {dim})"
 
 
 def test_discrete_preset_curve_passes_through_printed_B0_at_nominal_delay():

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from monitor.closed_loop import steady_state
+from monitor.model.closed_loop import steady_state
 from monitor.demo import montecarlo
 from monitor.demo.live import Scenario
 from monitor.demo.methods import METHODS, look
@@ -20,7 +20,7 @@ from monitor.demo.report import Row, format_table
 from monitor.demo.steady import held_output_steady_state, q_caption
 from monitor.design.result import DesignResult
 from monitor.errors import DesignFailed, UserError, run_cli_command
-from monitor.plant import Plant, load_plant
+from monitor.model.plant import Plant, load_plant
 from monitor.wire.specs import parse_delay_spec, parse_fault_spec
 from sim_vehicle.wind import parse_wind_spec
 from tests.designs import designed

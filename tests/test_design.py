@@ -7,12 +7,12 @@ import warnings
 import numpy as np
 import pytest
 
-from monitor.closed_loop import Gains, closed_loop, observer_indices
+from monitor.model.closed_loop import Gains, closed_loop, observer_indices
 from monitor.design import run_design
 from monitor.design.paper import lemma3_K2_K3
 from monitor.errors import DesignFailed
-from monitor.plant import parse_plant
-from monitor.verify import verify_gains
+from monitor.model.plant import parse_plant
+from monitor.checks.verify import verify_gains
 from tests.designs import designed
 
 @pytest.mark.parametrize("preset, objective, gamma_max, rho_bound", [

@@ -22,8 +22,8 @@ from monitor.design import run_design
 from monitor.design.separate import observer_alone
 from monitor.design.solve import CHECK_MARGIN, PATHS, SolveFailed, solve_checked
 from monitor.errors import DesignFailed
-from monitor.plant import Plant, load_plant, parse_plant, plant_from_table
-from monitor.verify import verify_gains
+from monitor.model.plant import Plant, load_plant, parse_plant, plant_from_table
+from monitor.checks.verify import verify_gains
 
 PRESETS = ("paper", "paper-continuous")
 INACCURATE = Path(__file__).parent / "data" / "paper-continuous-inaccurate.toml"

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from monitor.discretize import F_of_tau, delta_exact, delta_lemma1, discretize
-from monitor.plant import load_plant
+from monitor.model.discretize import F_of_tau, delta_exact, delta_lemma1, discretize
+from monitor.model.plant import load_plant
 
 
 def brute_force_step(model, h, tau, x0, u_prev, u_now, f, d):
@@ -54,7 +54,7 @@ def test_delta_exact_is_the_max_over_the_interval():
 
 
 def test_delta_summary_reports_both_deltas_for_either_form():
-    from monitor.delay_model import delta_summary
+    from monitor.model.delay_model import delta_summary
 
     printed = delta_summary(load_plant("paper"))
     assert printed["delta_lemma1"] == pytest.approx(0.3202, abs=2e-4) and printed["delta_file"] == pytest.approx(0.3202)

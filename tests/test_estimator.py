@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from monitor.closed_loop import Gains
-from monitor.estimator import Estimator
-from monitor.plant import load_plant
+from monitor.model.closed_loop import Gains
+from monitor.model.estimator import Estimator
+from monitor.model.plant import load_plant
 
 G = Gains(L=np.array([[1.8], [1.6]]), M=np.array([[0.9]]), K1=np.array([[-0.26]]), K2=np.array([[0.1]]),
           K3=np.array([[-1.0]]))

@@ -7,11 +7,11 @@ import tomllib
 import numpy as np
 import pytest
 
-from monitor.closed_loop import Gains
+from monitor.model.closed_loop import Gains
 from monitor.design.result import DesignResult
 from monitor.errors import UserError
 from monitor.gains import read_gains, write_gains
-from monitor.plant import load_plant
+from monitor.model.plant import load_plant
 
 
 def test_round_trip_is_exact_and_matrices_are_one_line(tmp_path):

@@ -8,7 +8,7 @@ import pytest
 
 from monitor.errors import UserError
 from monitor.link.signals import DEFAULT_SIGNALS_TOML, default_signal_map, parse_signals, signals_for_plant
-from monitor.plant import load_plant, parse_plant
+from monitor.model.plant import load_plant, parse_plant
 
 
 def _raw() -> dict:

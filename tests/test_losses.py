@@ -9,12 +9,13 @@ import tomllib
 
 import numpy as np
 
-from monitor.closed_loop import Gains, closed_loop, steady_state
-from monitor.delay_model import b0_of_tau, b0_polytope, input_sum
-from monitor.estimator import Estimator
-from monitor.loss_model import loss_modes, macro_steps
-from monitor.plant import load_plant
-from monitor.verify_losses import contraction, verify_losses
+from monitor.model.closed_loop import Gains, closed_loop, steady_state
+from monitor.model.delay_model import b0_of_tau, b0_polytope, input_sum
+from monitor.model.estimator import Estimator
+from monitor.model.loss_model import loss_modes, macro_steps
+from monitor.model.plant import load_plant
+from monitor.checks.norms import contraction
+from monitor.checks.verify_losses import verify_losses
 from tests.designs import designed
 
 DELIVERED, COMMAND_LOST, SAMPLE_LOST = "delivered", "command", "sample"
@@ -26,7 +27,7 @@ def design(objective: str, max_losses: int = 0):
 def simulate(plant, gains: Gains, events: list[str], taus: np.ndarray, fault: float, x0: np.ndarray):
     """Plant + the monitor's own Estimator under the contract's link events; returns xi at every processed sample.
 
-    Written from the contract, not from ``monitor.loss_model``: a lost command leaves the actuator where it
+    Written from the contract, not from ``monitor.model.loss_model``: a lost command leaves the actuator where it
     was; a lost sample means no estimator step and no command; the estimator learns from the next report
     (the deflection in force) whether its last command acted.
     """

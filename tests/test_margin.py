@@ -13,8 +13,8 @@ import pytest
 from monitor.design import run_design
 from monitor.errors import DesignFailed
 from monitor.gains import read_gains
-from monitor.plant import load_plant, with_tau_max
-from monitor.verify import verify_gains
+from monitor.model.plant import load_plant, with_tau_max
+from monitor.checks.verify import verify_gains
 
 UNSTABLE_PLANT = """
 form = "continuous"

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from monitor import metrics
+from monitor.checks import metrics
 
 
 def _bias_run(n: int = 60, onset: int = 20, size: float = 2.0, lag: int = 5) -> tuple[np.ndarray, ...]:

@@ -8,9 +8,9 @@ import sys
 import numpy as np
 import pytest
 
-from monitor.discretize import discretize
+from monitor.model.discretize import discretize
 from monitor.errors import UserError
-from monitor.plant import load_plant, parse_plant
+from monitor.model.plant import load_plant, parse_plant
 
 PAPER_A = np.array([[0.2759, 0.1839], [0.1379, 0.0921]])
 PAPER_BSUM = np.array([[0.2256 + 0.1359], [0.4234 + 0.6671]])

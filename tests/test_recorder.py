@@ -196,8 +196,8 @@ def test_recording_properties_describe_plant_and_gains(tmp_path: Path) -> None:
 
     import numpy as np
 
-    from monitor.closed_loop import Gains
-    from monitor.plant import load_plant
+    from monitor.model.closed_loop import Gains
+    from monitor.model.plant import load_plant
     from monitor.service.recorder import recording_properties
 
     plant = load_plant("paper")

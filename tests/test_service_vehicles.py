@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from monitor.closed_loop import Gains
+from monitor.model.closed_loop import Gains
 from monitor.design.result import DesignResult
 from monitor.errors import UserError
 from monitor.gains import write_gains
-from monitor.plant import load_plant
+from monitor.model.plant import load_plant
 from monitor.service.alarm import AlarmConfig
 from monitor.link.dialect import layout_by_name
 from monitor.service.vehicles import Fleet, VehicleTable, load_fleet, load_model

@@ -12,7 +12,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
-from monitor.plant import Actuator, load_plant
+from monitor.model.plant import Actuator, load_plant
 from sim_vehicle.dynamics import Airframe, segment_matrices
 
 PLANT = load_plant("paper-continuous")
@@ -56,7 +56,7 @@ def test_command_switching_mid_interval_matches_brute_force():
 
 
 def test_airframe_reproduces_the_papers_discrete_model():
-    from monitor.discretize import discretize
+    from monitor.model.discretize import discretize
 
     tau, u_prev, u_new = 0.31, 1.2, -0.7
     f, d = np.array([2.0]), np.array([0.01])

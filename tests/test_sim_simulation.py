@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monitor.discretize import discretize
-from monitor.plant import load_plant
+from monitor.model.discretize import discretize
+from monitor.model.plant import load_plant
 from monitor.wire.specs import parse_delay_spec, parse_fault_spec
 from sim_vehicle.network import DOWNLINK, UPLINK, Impairment
 from sim_vehicle.simulation import Simulation

@@ -9,10 +9,10 @@ import sys
 import numpy as np
 import pytest
 
-from monitor.closed_loop import closed_loop, steady_state
-from monitor.delay_model import b0_of_tau, tau_grid
+from monitor.model.closed_loop import closed_loop, steady_state
+from monitor.model.delay_model import b0_of_tau, tau_grid
 from monitor.errors import UserError
-from monitor.threshold import fault_threshold
+from monitor.checks.threshold import fault_threshold
 from tests.designs import designed
 
 
@@ -82,7 +82,7 @@ def _hand_gains(tmp_path, name: str):
 @pytest.mark.parametrize("preset, name", [("paper", "printed"), ("paper-continuous", "mild")])
 def test_hand_written_gains_on_both_presets(tmp_path, preset, name):
     from monitor.gains import read_gains
-    from monitor.plant import load_plant
+    from monitor.model.plant import load_plant
 
     plant, gains = load_plant(preset), read_gains(_hand_gains(tmp_path, name)).gains
     bound = fault_threshold(plant, gains, 1.0)

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monitor.closed_loop import Gains
+from monitor.model.closed_loop import Gains
 from monitor.design.paper import lemma3_K2_K3
-from monitor.plant import load_plant
-from monitor.verify import _growth_rate, hinf_norm, verify_gains
+from monitor.model.plant import load_plant
+from monitor.checks.norms import hinf_norm
+from monitor.checks.verify import _growth_rate, verify_gains
 
 
 def test_hinf_norm_of_a_first_order_lag_peaks_at_dc():

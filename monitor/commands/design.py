@@ -45,16 +45,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from monitor.design import run_design
-    from monitor.delay_model import delta_summary
+    from monitor.model.delay_model import delta_summary
     from monitor.errors import UserError
     from monitor.gains import write_gains
-    from monitor.plant import load_plant
+    from monitor.model.plant import load_plant
 
     if not args.weight_y >= 0:
         raise UserError(f"--weight-y must be >= 0, got {args.weight_y}")
     if args.objective and args.method != "certified":
         raise UserError(f"--objective applies to --method certified only, not {args.method}")
-    from monitor.loss_model import check_max_losses
+    from monitor.model.loss_model import check_max_losses
 
     check_max_losses(args.max_losses)
     options = {"weight_y": args.weight_y, "max_losses": args.max_losses}

@@ -35,8 +35,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from monitor.errors import UserError
     from monitor.gains import write_gains
-    from monitor.margin import delay_margin
-    from monitor.plant import load_plant
+    from monitor.checks.margin import delay_margin
+    from monitor.model.plant import load_plant
 
     plant = load_plant(args.plant)
     if args.tolerance is not None and not 0 < args.tolerance < plant.h:

@@ -76,7 +76,7 @@ def alarm_from_args(args: argparse.Namespace, fleet=None):
     if threshold == "auto":
         if args.disturbance_bound is None:
             raise UserError("--alarm-threshold auto needs --disturbance-bound D (the largest |d| to tolerate)")
-        from monitor.threshold import fault_threshold
+        from monitor.checks.threshold import fault_threshold
 
         bounds = [fault_threshold(m.plant, m.gains.gains, args.disturbance_bound) for m in (fleet.models() if fleet else [])]
         if not bounds:

@@ -44,8 +44,8 @@ def _other(bound) -> str:
 def run(args: argparse.Namespace) -> int:
     from monitor.errors import UserError
     from monitor.gains import read_gains
-    from monitor.plant import load_plant
-    from monitor.threshold import fault_threshold
+    from monitor.model.plant import load_plant
+    from monitor.checks.threshold import fault_threshold
 
     if not (math.isfinite(args.disturbance_bound) and args.disturbance_bound >= 0):
         raise UserError(f"--disturbance-bound must be a finite number >= 0, got {args.disturbance_bound}")

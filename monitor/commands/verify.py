@@ -37,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _inline_gains(args: argparse.Namespace, plant):
     """Gains from --L/--M/--K1 (and optional --K2/--K3, defaulting to the paper's Lemma 3 choice)."""
-    from monitor.closed_loop import Gains
+    from monitor.model.closed_loop import Gains
     from monitor.design.paper import lemma3_K2_K3
     from monitor.errors import UserError
     from monitor.gains import parse_gain_matrix
@@ -56,8 +56,8 @@ def _inline_gains(args: argparse.Namespace, plant):
 def run(args: argparse.Namespace) -> int:
     from monitor.errors import UserError
     from monitor.gains import read_gains
-    from monitor.plant import load_plant
-    from monitor.verify import verify_gains
+    from monitor.model.plant import load_plant
+    from monitor.checks.verify import verify_gains
 
     plant = load_plant(args.plant)
     certificate, gamma_e, gamma_z, method, warning, assumed = {}, None, None, "inline", None, []
@@ -78,13 +78,13 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UserError(str(exc)) from None
     if args.max_losses is not None:
-        from monitor.loss_model import check_max_losses
+        from monitor.model.loss_model import check_max_losses
 
         check_max_losses(args.max_losses)
     verdict = verify_gains(plant, gains, certificate or None, gamma_e, gamma_z)
     losses = None
     if args.max_losses is not None:
-        from monitor.verify_losses import verify_losses
+        from monitor.checks.verify_losses import verify_losses
 
         losses = verify_losses(plant, gains, args.max_losses, certificate or None)
     if args.json:

@@ -2,7 +2,7 @@
 
 Why a second simulator next to ``sim-vehicle``: Monte-Carlo over delay seeds needs thousands of samples
 per second and no sockets. It steps the exact discrete model (``B0(tau(k))``, ``B1(tau(k))`` from
-``monitor.delay_model``) with the same ``Estimator`` the live monitor runs, so it differs from the
+``monitor.model.delay_model``) with the same ``Estimator`` the live monitor runs, so it differs from the
 live run only in what the network adds (real latency, loss). Additive faults only (bias, ramp): loss of
 effectiveness and stuck act on the actuator, which only the vehicle simulator models.
 
@@ -19,12 +19,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor import metrics
-from monitor.closed_loop import Gains
-from monitor.delay_model import b0_of_tau, input_sum
+from monitor.checks import metrics
+from monitor.model.closed_loop import Gains
+from monitor.model.delay_model import b0_of_tau, input_sum
 from monitor.errors import UserError
-from monitor.estimator import Estimator
-from monitor.plant import Plant
+from monitor.model.estimator import Estimator
+from monitor.model.plant import Plant
 
 __all__ = ["Trace", "actuator", "simulate", "run_scenario", "monte_carlo", "Score", "score"]
 

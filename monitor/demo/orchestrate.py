@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from monitor.demo.report import Row
     from monitor.design.result import DesignResult
     from monitor.gains import GainsFile
-    from monitor.plant import Plant
+    from monitor.model.plant import Plant
 
 __all__ = ["PRIMARY", "DemoOptions", "Designed", "FailedDesign", "Flown", "run_demo", "fly_live", "report_live",
            "conclude"]
@@ -150,7 +150,7 @@ def _gains_for(method: str, plant: Plant, path: Path, redesign: bool, progress: 
 
 def _verified(method: str, gf: GainsFile, plant: Plant, progress: _Progress) -> Designed:
     """``verify``'s verdict on one design's gains, re-checking its certificate when the file carries one."""
-    from monitor.verify import verify_gains
+    from monitor.checks.verify import verify_gains
 
     v = verify_gains(plant, gf.gains, gf.certificate or None, gf.meta.get("gamma_e"), gf.meta.get("gamma_z"))
     progress(f"{method:<15} verify: {'stable' if v.stable else 'UNSTABLE'} (rho_max {v.rho_max:.3f}, "
@@ -184,7 +184,7 @@ def run_demo(options: DemoOptions, design: DesignFn | None = None, fly: Fly | No
     ``design`` (method, plant -> DesignResult) and ``fly`` (one verified design -> its row and trace) default to
     ``run_design`` and the live daemons; they are parameters so that the steps around them can be exercised alone.
     """
-    from monitor.plant import load_plant
+    from monitor.model.plant import load_plant
     from monitor.wire.specs import parse_delay_spec, parse_fault_spec
 
     t0 = time.monotonic()

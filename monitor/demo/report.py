@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor import metrics
+from monitor.checks import metrics
 from monitor.demo.montecarlo import Trace
 
 __all__ = ["Row", "trace_from_recording", "row_from_recording", "format_table", "SETTLING_FLOOR"]

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.plant import Plant
+from monitor.model.plant import Plant
 
 __all__ = ["HeldOutput", "held_output_steady_state", "constant_fault_at_end", "q_caption"]
 

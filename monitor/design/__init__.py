@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Callable
 
 from monitor.design.result import DesignResult
-from monitor.plant import Plant
+from monitor.model.plant import Plant
 
 METHODS = ("certified", "paper", "separate", "robust-separate")
 OBJECTIVES = ("fast", "hinf")
@@ -21,7 +21,7 @@ def run_design(method: str, plant: Plant, **options) -> DesignResult:
     objective = options.pop("objective", None)
     max_losses = int(options.pop("max_losses", 0) or 0)
     if max_losses:
-        from monitor.loss_model import check_max_losses
+        from monitor.model.loss_model import check_max_losses
 
         check_max_losses(max_losses)
     if max_losses and (method, objective) in (("certified", None), ("certified", "fast")):
@@ -41,9 +41,35 @@ def run_design(method: str, plant: Plant, **options) -> DesignResult:
     else:
         raise ValueError(f"unknown design method {method!r} (choose from {', '.join(METHODS)})")
     design: Callable[..., DesignResult] = fn
-    result = design(plant, **options)
+    if method == "certified" and objective is None:
+        result = _fast_or_hinf(plant, options)
+    else:
+        result = design(plant, **options)
     if max_losses:
         from monitor.design.loss_certificate import certify_losses
 
         result = certify_losses(result, plant, max_losses)
     return result
+
+
+def _fast_or_hinf(plant: Plant, options: dict) -> DesignResult:
+    """The default objective: fast, and the H-infinity design when fast finds no certificate (said in the notes).
+
+    Why: the fast objective pins the observer in closed form and searches only the controller, so on some
+    plants no controller it tries has a common certificate while the joint H-infinity design, which moves
+    the observer too, has one. A user who asked for nothing in particular wants a certified design.
+    """
+    from monitor.design.certified import design_certified
+    from monitor.design.fast import design_fast
+    from monitor.errors import DesignFailed
+
+    try:
+        return design_fast(plant, **options)
+    except DesignFailed as fast_failure:
+        hinf_options = {k: v for k, v in options.items() if k in ("weight_y", "progress")}
+        try:
+            result = design_certified(plant, **hinf_options)
+        except DesignFailed as hinf_failure:
+            raise DesignFailed(f"{fast_failure}; the H-infinity objective tried next: {hinf_failure}") from None
+        result.notes.insert(0, f"the fast objective failed ({fast_failure}); fell back to the H-infinity objective")
+        return result

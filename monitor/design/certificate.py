@@ -18,10 +18,10 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
-from monitor.closed_loop import Gains, closed_loop, steady_state
+from monitor.model.closed_loop import Gains, closed_loop, steady_state
 from monitor.design.lmi_blocks import brl_margin
 from monitor.design.solve import EPS, Solved, SolveFailed, solve_checked
-from monitor.plant import Plant
+from monitor.model.plant import Plant
 
 __all__ = ["Certificate", "CertificateLMI"]
 

@@ -1,6 +1,6 @@
 """Certified joint design of L, M, K1, K2 (and K3) over a polytope that contains every B0(tau).
 
-The chain: plant -> polytope of ``B0(tau)`` (``monitor.delay_model``) -> for a controller ``(K1, K2)``,
+The chain: plant -> polytope of ``B0(tau)`` (``monitor.model.delay_model``) -> for a controller ``(K1, K2)``,
 one convex problem in the observer gains -> an outer search over the controller -> gains + certificate.
 
 Inner problem (convex, Clarabel): for fixed ``K1, K2`` (``K3`` cancels the fault in steady state) the real
@@ -29,13 +29,13 @@ import cvxpy as cp
 import numpy as np
 from scipy.optimize import minimize
 
-from monitor.closed_loop import Gains, closed_loop, fault_cancelling_K3, observer_indices, steady_state
-from monitor.delay_model import b0_polytope
+from monitor.model.closed_loop import Gains, closed_loop, fault_cancelling_K3, observer_indices, steady_state
+from monitor.model.delay_model import b0_polytope
 from monitor.design.lmi_blocks import brl_margin, hinf_slack_lmi
 from monitor.design.result import DesignResult
 from monitor.design.solve import SEARCH_PATHS, Solved, SolveFailed, solve_checked
 from monitor.errors import DesignFailed
-from monitor.plant import Plant
+from monitor.model.plant import Plant
 
 __all__ = ["design_certified", "ObserverLMI"]
 

@@ -10,7 +10,7 @@ possible, and it diverges when every other sample is lost. Two facts give a bett
    the earliest any observer of form (5) can: f(k0) first shows in y(k0+1). When ``C Df`` is square and
    invertible this pins (L, M); with more outputs than faults the minimum-norm solution is taken.
 2. **What spoils it is delay mismatch, and the controller sets its size.** Away from the nominal delay
-   the observer error is driven by ``(B0(tau) - B0) (u(k) - u(k-1))`` (see ``monitor.closed_loop``): the
+   the observer error is driven by ``(B0(tau) - B0) (u(k) - u(k-1))`` (see ``monitor.model.closed_loop``): the
    larger the command increments the fault compensation makes, the more a varying delay disturbs f-hat.
    So the controller (K1, K2; K3 cancels the fault in steady state) is searched to minimise
    ``gamma_e^2 + weight_y * gamma_z^2`` while the energy of ``e_f`` that a unit step fault leaves after
@@ -30,14 +30,14 @@ from collections.abc import Callable
 import numpy as np
 from scipy.optimize import minimize
 
-from monitor.closed_loop import Gains, closed_loop, fault_cancelling_K3, steady_state
-from monitor.delay_model import b0_of_tau, b0_polytope
+from monitor.model.closed_loop import Gains, closed_loop, fault_cancelling_K3, steady_state
+from monitor.model.delay_model import b0_of_tau, b0_polytope
 from monitor.design.certificate import CertificateLMI
 from monitor.design.result import DesignResult
 from monitor.errors import DesignFailed
-from monitor.loss_model import macro_step_growth
-from monitor.plant import Plant
-from monitor.verify import hinf_norm
+from monitor.model.loss_model import macro_step_growth
+from monitor.model.plant import Plant
+from monitor.checks.norms import hinf_norm
 
 __all__ = ["design_fast", "deadbeat_observer", "mismatch_energy"]
 

@@ -44,7 +44,7 @@ def brl_margin(X: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray, g: fl
     (a congruence with a matrix whose Gram is ``>= I``), and ``X >= EPS I``; so a point the solver really
     solved has margin ``>= EPS``, and stability plus the bound ``sqrt(g)`` follow from any positive margin.
     """
-    N, nw, k = A.shape[0], B.shape[1], C.shape[0]
+    nw, k = B.shape[1], C.shape[0]
     M = np.block([
         [A.T @ X @ A - X, A.T @ X @ B, C.T],
         [B.T @ X @ A, B.T @ X @ B - g * np.eye(nw), np.zeros((nw, k))],

@@ -1,6 +1,6 @@
 """A certificate that fixed gains keep the loop stable through up to N consecutive losses (LMI in P only).
 
-One P with ``S^T P S <= 0.999^2 P`` for every macro-step ``S`` (``monitor.loss_model``: j <= N losses of either
+One P with ``S^T P S <= 0.999^2 P`` for every macro-step ``S`` (``monitor.model.loss_model``: j <= N losses of either
 kind, then a delivered sample) at every vertex of the delay polytope proves that every sequence of
 delays in the interval and losses with at most N in a row converges: ``V(xi) = xi^T P xi`` decreases
 over each macro-step, the macro-step at any delay is a convex combination of the vertex ones, and the
@@ -15,14 +15,14 @@ import time
 import cvxpy as cp
 import numpy as np
 
-from monitor.closed_loop import Gains, steady_state
-from monitor.delay_model import b0_polytope
+from monitor.model.closed_loop import Gains, steady_state
+from monitor.model.delay_model import b0_polytope
 from monitor.design.result import DesignResult
 from monitor.design.solve import EPS, SolveFailed, most_positive_eigenvalue, solve_checked
 from monitor.errors import DesignFailed
-from monitor.loss_model import macro_steps
-from monitor.plant import Plant
-from monitor.verify_losses import contraction
+from monitor.model.loss_model import macro_steps
+from monitor.model.plant import Plant
+from monitor.checks.norms import contraction
 
 __all__ = ["loss_certificate", "certify_losses", "CONTRACTION"]
 

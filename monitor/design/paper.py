@@ -17,12 +17,12 @@ import time
 import cvxpy as cp
 import numpy as np
 
-from monitor.closed_loop import Gains
+from monitor.model.closed_loop import Gains
 from monitor.design.lmi_blocks import brl_margin, hinf_slack_lmi
 from monitor.design.result import DesignResult
 from monitor.design.solve import SolveFailed, solve_checked
 from monitor.errors import DesignFailed
-from monitor.plant import Plant
+from monitor.model.plant import Plant
 
 __all__ = ["design_paper", "lemma3_K2_K3"]
 

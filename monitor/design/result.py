@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from monitor.closed_loop import Gains
+from monitor.model.closed_loop import Gains
 from monitor.design.solve import Solved
 
 

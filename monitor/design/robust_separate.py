@@ -26,13 +26,13 @@ import time
 import numpy as np
 from scipy.optimize import minimize
 
-from monitor.closed_loop import Gains, fault_cancelling_K3
-from monitor.delay_model import b0_polytope
+from monitor.model.closed_loop import Gains, fault_cancelling_K3
+from monitor.model.delay_model import b0_polytope
 from monitor.design.result import DesignResult
 from monitor.design.separate import observer_alone
 from monitor.errors import DesignFailed
-from monitor.plant import Plant
-from monitor.verify import hinf_norm
+from monitor.model.plant import Plant
+from monitor.checks.norms import hinf_norm
 
 __all__ = ["design_robust_separate", "robust_controller_alone"]
 

@@ -17,13 +17,13 @@ import cvxpy as cp
 import numpy as np
 from scipy.optimize import minimize
 
-from monitor.closed_loop import Gains, fault_cancelling_K3
+from monitor.model.closed_loop import Gains, fault_cancelling_K3
 from monitor.design.lmi_blocks import brl_margin, hinf_slack_lmi
 from monitor.design.result import DesignResult
 from monitor.design.solve import Solved, SolveFailed, solve_checked
 from monitor.errors import DesignFailed
-from monitor.plant import Plant
-from monitor.verify import hinf_norm
+from monitor.model.plant import Plant
+from monitor.checks.norms import hinf_norm
 
 __all__ = ["design_separate", "observer_alone", "controller_alone"]
 

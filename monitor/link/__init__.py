@@ -8,7 +8,7 @@
         |       the command channel, and which message defines the sampling instant
     assembly    per vehicle, parts of one sampling instant gathered into one sample, bounded waiting
         |
-    monitor.service.vehicles -> monitor.estimator   (the vehicle table and eqs. (5)-(6))
+    monitor.service.vehicles -> monitor.model.estimator   (the vehicle table and eqs. (5)-(6))
 
 ``fault-monitor run`` and ``fault-monitor analyse`` share everything from ``frames`` down; the only
 difference is whether a command goes back (``monitor.service.pipeline``).

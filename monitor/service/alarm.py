@@ -10,7 +10,7 @@ against the real ``sim-vehicle`` in the paper's scenario (bias 2 deg at k = 20, 
 uniform over [0, 0.46] s; seeds 0, 1, 2, 3, 5): before onset max |f_hat| stays below 0.01 deg (no false
 alarm); with the default (fast) design f_hat jumps to about 2 deg at k = 22, the earliest possible, and
 the alarm raises at k = 23 after its 2-sample persistence (tests/e2e/test_monitor_paper.py checks it).
-A threshold proven never to trip on a bounded disturbance: ``--alarm-threshold auto`` (monitor.threshold).
+A threshold proven never to trip on a bounded disturbance: ``--alarm-threshold auto`` (monitor.checks.threshold).
 """
 
 from __future__ import annotations

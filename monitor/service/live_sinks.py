@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from monitor.errors import UserError
-from monitor.service.recorder import StreamWriter, default_blueprint, open_stream
+from monitor.service.rrd_stream import StreamWriter, default_blueprint, open_stream
 
 __all__ = ["LIVE_QUEUE_MAX", "SPAWN_PORT", "LiveSink", "find_viewer", "parse_viewer_url", "spawn_viewer",
            "viewer_answers"]

@@ -33,11 +33,11 @@ from typing import Any
 
 
 from monitor.errors import UserError
-from monitor.estimator import Estimator, EstimatorState, StepResult
+from monitor.model.estimator import Estimator, EstimatorState, StepResult
 from monitor.gains import GainsFile, read_gains
 from monitor.link.assembly import AssembledSample, AssemblyCounters, SampleAssembler
 from monitor.link.signals import SignalMap, signals_for_plant
-from monitor.plant import Plant, load_plant
+from monitor.model.plant import Plant, load_plant
 from monitor.service.alarm import Alarm, AlarmConfig
 from monitor.service.delay import DelayTracker
 

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.closed_loop import Gains
+from monitor.model.closed_loop import Gains
 from monitor.design.result import DesignResult
 from monitor.gains import write_gains
-from monitor.plant import load_plant, parse_plant
+from monitor.model.plant import load_plant, parse_plant
 from monitor.wire.mavlink import mavlink, new_codec
 from tests.daemons import REPO, Daemon, free_tcp_port, free_udp_port
 from tests.e2e.test_monitor_paper import gains_file, processed_count, wait_ready  # noqa: F401 (fixture)

@@ -35,7 +35,7 @@ def gains_file(tmp_path_factory) -> Path:
     """The default certified design for paper-continuous (what `fault-monitor design` writes), once per session."""
     from monitor.design import run_design
     from monitor.gains import write_gains
-    from monitor.plant import load_plant
+    from monitor.model.plant import load_plant
 
     plant = load_plant("paper-continuous")
     path = tmp_path_factory.mktemp("gains") / "certified.toml"

@@ -14,8 +14,8 @@ import time
 import numpy as np
 import pytest
 
-from monitor.discretize import discretize
-from monitor.plant import load_plant
+from monitor.model.discretize import discretize
+from monitor.model.plant import load_plant
 from monitor.wire.mavlink import (
     MONITOR_COMPONENT,
     Command,

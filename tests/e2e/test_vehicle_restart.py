@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from monitor.plant import load_plant
+from monitor.model.plant import load_plant
 from monitor.wire.mavlink import mavlink
 from tests.daemons import REPO, free_udp_port
 from tests.e2e.test_monitor_paper import monitor_daemon, processed_count, sim_daemon, wait_ready, zenoh_bus

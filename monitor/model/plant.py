@@ -3,7 +3,7 @@
 A plant file is TOML in one of two forms (see the README):
 
 * ``form = "continuous"``: ``A_c, B_c, D_cf, D_cd, C`` plus ``h, tau_min, tau_max``. The delay-aware
-  discrete model follows exactly from it (``monitor.discretize``); the simulator integrates it.
+  discrete model follows exactly from it (``monitor.model.discretize``); the simulator integrates it.
 * ``form = "discrete"``: ``A, B0, B1, C, Df, Dd`` plus ``h, tau_min, tau_max`` and optionally ``delta``
   and ``E``. The delay then enters only as the paper's norm-bounded uncertainty
   ``B0(tau) = B0 + F E``, ``B1(tau) = B1 - F E``, ``sigma_max(F) <= delta``.
@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from monitor.errors import UserError
+from monitor.model.discretize import ContinuousModel, discretize
 
 __all__ = ["Plant", "ContinuousModel", "Actuator", "load_plant", "parse_plant", "plant_from_table", "with_tau_max", "preset_names"]
 
@@ -43,16 +44,6 @@ class Actuator:
 
     limit: float | None = None
     rate_limit: float | None = None
-
-
-@dataclass(frozen=True)
-class ContinuousModel:
-    """``x' = A_c x + B_c u + D_cf f + D_cd d``, ``y = C x``."""
-
-    A_c: np.ndarray
-    B_c: np.ndarray
-    D_cf: np.ndarray
-    D_cd: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -196,8 +187,6 @@ def plant_from_table(raw: dict[str, Any], source: str) -> Plant:
         B_c = reader.matrix("B_c", rows=n)
         D_cf = reader.matrix("D_cf", rows=n)
         D_cd = reader.matrix("D_cd", rows=n)
-        from monitor.discretize import discretize  # local: discretize imports Plant
-
         model = ContinuousModel(A_c=A_c, B_c=B_c, D_cf=D_cf, D_cd=D_cd)
         d = discretize(model, h, 0.5 * (tau_min + tau_max))
         return Plant(A=d.A, B0=d.B0, B1=d.B1, Df=d.Df, Dd=d.Dd, continuous=model, **common)

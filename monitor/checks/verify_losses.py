@@ -3,7 +3,7 @@
 Two kinds of evidence, kept apart so the verdict can never call a divergent loop stable:
 
 * **Divergence search** (lower bounds of the switched loop's growth rate): every macro-step (j <= N
-  losses of either kind, then a delivered sample; ``monitor.loss_model``) at a dense grid of delays,
+  losses of either kind, then a delivered sample; ``monitor.model.loss_model``) at a dense grid of delays,
   its spectral radius per sample; and long renormalised products of adversarial and random patterns:
   alternating delivered/lost, bursts of exactly N losses of each kind and mixed, random admissible
   patterns, with the delay at the interval's ends or random. Any growth >= 1 is a pattern that diverges.
@@ -26,13 +26,13 @@ from typing import Any
 
 import numpy as np
 
-from monitor.closed_loop import Gains, closed_loop, steady_state
-from monitor.delay_model import b0_of_tau, b0_polytope, tau_grid
-from monitor.loss_model import check_max_losses, loss_modes, loss_sequences, macro_step_growth, macro_steps
-from monitor.norms import induced_norms, norm_factor
-from monitor.plant import Plant
+from monitor.model.closed_loop import Gains, closed_loop, steady_state
+from monitor.model.delay_model import b0_of_tau, b0_polytope, tau_grid
+from monitor.model.loss_model import check_max_losses, loss_modes, loss_sequences, macro_step_growth, macro_steps
+from monitor.checks.norms import contraction
+from monitor.model.plant import Plant
 
-__all__ = ["LossVerdict", "verify_losses", "contraction"]
+__all__ = ["LossVerdict", "verify_losses"]
 
 
 @dataclass
@@ -112,20 +112,6 @@ def _averaged_lyapunov(steps: list[np.ndarray], iterations: int = 500) -> np.nda
             return nxt
         P = nxt
     return None
-
-
-def contraction(P: np.ndarray, steps: list[np.ndarray], depth: int = 1) -> float:
-    """``max ||product||_P ** (1/depth)`` over every product of ``depth`` (1 or 2) macro-steps; inf when P is no norm.
-
-    < 1 proves that every product of the steps (in any order, any convex combination) converges.
-    """
-    R = norm_factor(P)
-    if R is None:
-        return float("inf")
-    mats = np.array(steps)
-    if depth == 2:
-        mats = np.einsum("iab,jbc->ijac", mats, mats).reshape(-1, *mats.shape[1:])
-    return float(np.max(induced_norms(R, mats))) ** (1.0 / depth)
 
 
 def _searched_norm(plant: Plant, gains: Gains, vertices: list[np.ndarray], max_losses: int) -> np.ndarray | None:

@@ -5,7 +5,7 @@ Both plant forms have ``B0(tau) + B1(tau) = B0 + B1`` for every ``tau``, so the 
 if ``B0(tau)`` lies in the convex hull of a few vertices for every ``tau`` in the interval, one common
 Lyapunov matrix that works at every vertex works for any sequence ``tau(k)``.
 
-* continuous form: ``B0(tau)`` is exact (``monitor.discretize``).
+* continuous form: ``B0(tau)`` is exact (``monitor.model.discretize``).
 * discrete form: ``B0(tau) = B0 + F(tau) E`` with the paper's own ``F(tau)`` computed from the
   reconstructed ``A_c = logm(A)/h`` and ``E`` from the file (or the reconstructed ``B_c``).
 """
@@ -16,8 +16,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from monitor.discretize import F_of_tau, b0_b1, delta_exact, delta_lemma1, integral_expm, reconstruct_continuous
-from monitor.plant import ContinuousModel, Plant
+from monitor.model.discretize import F_of_tau, b0_b1, delta_exact, delta_lemma1, integral_expm, reconstruct_continuous
+from monitor.model.plant import ContinuousModel, Plant
 
 __all__ = ["b0_of_tau", "tau_grid", "b0_polytope", "curve_model", "input_sum", "delta_summary"]
 
@@ -86,9 +86,7 @@ def b0_polytope(plant: Plant, segments: int = 8) -> list[np.ndarray]:
     dtau = (plant.tau_max - plant.tau_min) / segments
     radius = dtau**2 / 8.0 * _second_derivative_bound(plant) * np.sqrt(dim) * 1.001
     cloud = np.array([pt + s * radius * e for pt in points for e in np.eye(dim) for s in (1.0, -1.0)])
-    hull = _prune(cloud)
-    box = _oriented_box(cloud)
-    chosen = box if len(box) < len(hull) else hull
+    chosen = min((_prune(cloud), _oriented_box(cloud), _oriented_prism(cloud)), key=len)
     return [v.reshape(plant.B0.shape) for v in chosen]
 
 
@@ -107,6 +105,28 @@ def _oriented_box(cloud: np.ndarray) -> np.ndarray:
         return cloud
     corners = np.array(np.meshgrid(*[(a, b) for a, b in zip(lo, hi)], indexing="ij")).reshape(dim, -1).T
     return centre + corners @ axes
+
+
+def _oriented_prism(cloud: np.ndarray) -> np.ndarray:
+    """A prism along the cloud's main axis over a simplex in the thin directions: ``2 dim`` vertices.
+
+    Why: the box has ``2^dim`` corners (16 for a 4-state aircraft), and each vertex costs LMIs in every
+    design. The curve's length lies along one axis; across it the cloud is only as thick as its curvature
+    and the chord error, so a simplex there (``dim`` vertices, stretched by ``dim - 1`` in those thin
+    directions) costs little conservatism and halves the count at dim = 4. Contains the principal box.
+    """
+    centre = cloud.mean(axis=0)
+    _, _, axes = np.linalg.svd(cloud - centre, full_matrices=True)
+    coords = (cloud - centre) @ axes.T
+    lo, hi = coords.min(axis=0), coords.max(axis=0)
+    dim = cloud.shape[1]
+    if dim < 3:
+        return cloud
+    width = hi[1:] - lo[1:]
+    # the thin simplex {y >= lo, sum_j (y_j - lo_j) / w_j <= dim - 1} holds the thin box
+    thin = [lo[1:]] + [lo[1:] + (dim - 1) * w * e for w, e in zip(width, np.eye(dim - 1))]
+    corners = np.array([np.concatenate([[end], t]) for end in (lo[0], hi[0]) for t in thin])
+    return np.unique(centre + corners @ axes, axis=0)
 
 
 def _prune(cloud: np.ndarray) -> np.ndarray:

@@ -6,7 +6,7 @@ With no fault, zero initial state and ``|d(k)| <= D``, ``f_hat = -e_f`` and, for
 
 so ``sup |f_hat| <= D * sum_j max |C Phi_j B|`` over every admissible sequence (the worst ``d`` takes the sign
 of each term: this is the l1 norm of the time-varying impulse response). The loop is affine in ``B0(tau)``,
-which lies in a polytope (``monitor.delay_model``), so ``C Phi_j B`` is multi-affine in the per-sample
+which lies in a polytope (``monitor.model.delay_model``), so ``C Phi_j B`` is multi-affine in the per-sample
 convex weights and each term's largest magnitude is reached at a sequence of polytope vertices:
 
 * **head** (j < T): every vertex sequence is enumerated (4^j of them here), the exact worst of each term;
@@ -37,11 +37,11 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import scipy.linalg
 
-from monitor.closed_loop import Gains, closed_loop, steady_state
-from monitor.delay_model import b0_of_tau, b0_polytope, tau_grid
+from monitor.model.closed_loop import Gains, closed_loop, steady_state
+from monitor.model.delay_model import b0_of_tau, b0_polytope, tau_grid
 from monitor.errors import UserError
-from monitor.norms import dual_norms, induced_norms, norm_factor
-from monitor.plant import Plant
+from monitor.checks.norms import dual_norms, induced_norms, norm_factor
+from monitor.model.plant import Plant
 
 __all__ = ["ThresholdBound", "fault_threshold", "frozen_l1"]
 

@@ -1,6 +1,6 @@
 """An independent check of any gains on the real closed loop, sharing nothing with the LMI designs.
 
-It rebuilds the loop with the ``u(k-1)`` state (``monitor.closed_loop``) from the plant and the gains alone
+It rebuilds the loop with the ``u(k-1)`` state (``monitor.model.closed_loop``) from the plant and the gains alone
 and reports:
 
 * ``rho_max``/``tau_worst``: the largest spectral radius over a dense grid of constant delays;
@@ -23,11 +23,12 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.optimize import linprog
 
-from monitor.closed_loop import Gains, LoopMatrices, closed_loop, steady_state
-from monitor.delay_model import b0_of_tau, tau_grid
-from monitor.plant import Plant
+from monitor.model.closed_loop import Gains, LoopMatrices, closed_loop, steady_state
+from monitor.model.delay_model import b0_of_tau, tau_grid
+from monitor.checks.norms import hinf_norm
+from monitor.model.plant import Plant
 
-__all__ = ["Verdict", "verify_gains", "hinf_norm"]
+__all__ = ["Verdict", "verify_gains"]
 
 
 @dataclass
@@ -48,38 +49,6 @@ class Verdict:
 
     def as_dict(self) -> dict:
         return asdict(self)
-
-
-def hinf_norm(A: np.ndarray, B: np.ndarray, C: np.ndarray, points: int = 2048) -> float:
-    """``sup_w sigma_max(C (e^{jw} I - A)^-1 B)`` of a stable discrete system; inf when unstable."""
-    if np.max(np.abs(np.linalg.eigvals(A))) >= 1.0:
-        return float("inf")
-    n = A.shape[0]
-
-    def gain(omega: float | np.ndarray) -> np.ndarray:
-        z = np.exp(1j * np.atleast_1d(omega))
-        resolvent = z[:, None, None] * np.eye(n) - A
-        H = C @ np.linalg.solve(resolvent, np.broadcast_to(B, (z.size, *B.shape)))
-        return np.linalg.svd(H, compute_uv=False)[:, 0]
-
-    omegas = np.concatenate([np.linspace(0.0, np.pi, points), np.geomspace(1e-5, 1e-1, 200)])
-    values = gain(omegas)
-    i = int(np.argmax(values))
-    best = float(values[i])
-    step = np.pi / (points - 1)
-    lo, hi = max(omegas[i] - step, 0.0), min(omegas[i] + step, np.pi)
-    # Refine the peak by zooming: each level evaluates 17 frequencies in one batched solve and keeps the two
-    # grid steps around the best one (1/8 of the bracket), so 7 levels locate it to about 1e-7 of a sweep step.
-    # One batched call per level instead of a scalar search's ~30 single-frequency calls: the design searches
-    # call this thousands of times.
-    for _ in range(7):
-        grid = np.linspace(lo, hi, 17)
-        level = gain(grid)
-        j = int(np.argmax(level))
-        best = max(best, float(level[j]))
-        width = (hi - lo) / 16
-        lo, hi = max(grid[j] - width, 0.0), min(grid[j] + width, np.pi)
-    return best
 
 
 def _loops(plant: Plant, gains: Gains, taus: np.ndarray, steady) -> list[LoopMatrices]:

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.plant import Plant
+from monitor.model.plant import Plant
 
 __all__ = ["Gains", "LoopMatrices", "steady_state", "fault_cancelling_K3", "closed_loop", "observer_indices"]
 

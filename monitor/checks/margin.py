@@ -1,6 +1,6 @@
 """How much delay can the loop take? The largest ``tau_max`` with a certified design, by bisection.
 
-Each probe designs for the plant with the interval ``[tau_min, tau_max]`` (``monitor.plant.with_tau_max``)
+Each probe designs for the plant with the interval ``[tau_min, tau_max]`` (``monitor.model.plant.with_tau_max``)
 and keeps it only when the design's certificate holds, so every point of the answer is backed by a
 certificate, not by a simulation. Bisection assumes that a certifiable interval stays certifiable when
 it shrinks (true of the certificate, whose polytope shrinks with it; the controller search is a
@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from monitor.design import run_design
 from monitor.design.result import DesignResult
 from monitor.errors import DesignFailed, UserError
-from monitor.plant import Plant, with_tau_max
+from monitor.model.plant import Plant, with_tau_max
 
 __all__ = ["Margin", "delay_margin"]
 

@@ -1,11 +1,11 @@
 """The real closed loop when the network loses samples or commands: a switched system with three modes.
 
 The contract's link events (CONTRACT.md, "What the estimator uses"), in the coordinates of
-``monitor.closed_loop`` (``xi = [x~; e_x; e_f; u~]``, deviations from the constant-fault steady state):
+``monitor.model.closed_loop`` (``xi = [x~; e_x; e_f; u~]``, deviations from the constant-fault steady state):
 
 * **delivered** (``closed_loop`` at ``B0(tau)``): the command for k acts after ``tau(k) < h``;
 * **command lost or late**: the actuator holds ``u(k-1)`` the whole period; the estimator, told so by the
-  next report, steps with the held deflection (``monitor.estimator``), so its error sees no delay mismatch:
+  next report, steps with the held deflection (``monitor.model.estimator``), so its error sees no delay mismatch:
   ``x~+ = A x~ + (B0+B1) u~``, ``e_x+ = (A - L C) e_x + Df e_f``, ``e_f+ = e_f - M C e_x``, ``u~+ = u~``;
 * **sample lost**: no command, the actuator holds, the estimator predicts without innovation:
   ``e_x+ = A e_x + Df e_f``, ``e_f+ = e_f``; the plant part as above.
@@ -24,8 +24,8 @@ import itertools
 
 import numpy as np
 
-from monitor.closed_loop import Gains, closed_loop, observer_indices
-from monitor.plant import Plant
+from monitor.model.closed_loop import Gains, closed_loop, observer_indices
+from monitor.model.plant import Plant
 
 __all__ = ["loss_modes", "loss_sequences", "macro_steps", "macro_step_growth", "check_max_losses", "LOSS_KINDS",
            "MAX_LOSSES"]

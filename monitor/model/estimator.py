@@ -27,8 +27,8 @@ from operator import mul
 
 import numpy as np
 
-from monitor.closed_loop import Gains
-from monitor.plant import Plant
+from monitor.model.closed_loop import Gains
+from monitor.model.plant import Plant
 
 __all__ = ["EstimatorState", "StepResult", "Estimator"]
 

@@ -15,7 +15,6 @@ Pure functions only: no I/O, no clocks.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.linalg import expm, logm
@@ -23,10 +22,9 @@ from scipy.optimize import minimize_scalar
 
 from monitor.errors import UserError
 
-if TYPE_CHECKING:
-    from monitor.plant import ContinuousModel
 
 __all__ = [
+    "ContinuousModel",
     "Discrete",
     "integral_expm",
     "discretize",
@@ -36,6 +34,16 @@ __all__ = [
     "delta_exact",
     "reconstruct_continuous",
 ]
+
+
+@dataclass(frozen=True)
+class ContinuousModel:
+    """``x' = A_c x + B_c u + D_cf f + D_cd d``, ``y = C x``."""
+
+    A_c: np.ndarray
+    B_c: np.ndarray
+    D_cf: np.ndarray
+    D_cd: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -118,8 +126,6 @@ def reconstruct_continuous(A: np.ndarray, Bsum: np.ndarray, Df: np.ndarray, Dd: 
     ``Bsum = B0 + B1`` is the zero-delay input matrix. Fails with a UserError when ``A`` has no real
     logarithm (e.g. a negative real eigenvalue), since then no continuous plant exists.
     """
-    from monitor.plant import ContinuousModel
-
     eig = np.linalg.eigvals(A)
     if np.any(np.abs(eig) < 1e-300) or np.any((np.abs(eig.imag) < 1e-12) & (eig.real < 0)):
         raise UserError("discrete A has a zero or negative real eigenvalue: no real continuous plant exists")
