@@ -28,6 +28,7 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+import scipy.linalg
 from scipy.optimize import minimize
 
 from monitor.model.closed_loop import Gains, closed_loop, fault_cancelling_K3, steady_state
@@ -37,7 +38,7 @@ from monitor.design.result import DesignResult
 from monitor.errors import DesignFailed
 from monitor.model.loss_model import macro_step_growth
 from monitor.model.plant import Plant
-from monitor.checks.norms import hinf_norm
+from monitor.checks.norms import hinf_norms
 
 __all__ = ["design_fast", "deadbeat_observer", "mismatch_energy"]
 
@@ -47,15 +48,36 @@ MAX_K2_RADIUS = 0.9  # the controller's own memory u(k) = K2 u(k-1) + ... must f
 
 
 def deadbeat_observer(plant: Plant) -> tuple[np.ndarray, np.ndarray]:
-    """(L, M) with ``[L; M] C Df = [(A + I) Df; I]``: a step fault estimated two samples after onset."""
+    """(L, M) with ``[L; M] C Df = [(A + I) Df; I]``: a step fault estimated two samples after onset.
+
+    With as many outputs as faults (the paper's plant) this pins (L, M). With more (an aircraft whose four
+    states are all measured), it pins only how the observer answers the fault's own output signature
+    ``C Df``; the minimum-norm solution then leaves every other direction of the error open loop, so the
+    error of a slow mode decays at the mode's own rate (0.9999 per sample for a phugoid at h = 0.02 s,
+    and a hair above 1 on one aircraft). The outputs orthogonal to ``C Df`` (``Pi y``) are free: any gain
+    ``Z Pi`` added keeps the deadbeat condition (``Pi C Df = 0``), so Z is the steady-state Kalman gain of
+    the error system seen through ``Pi C`` (unit weights; measured: the error's spectral radius falls from
+    0.999-1.0001 to 0.38 on four aircraft at h = 0.02 and 0.05 s).
+    """
     CDf = plant.C @ plant.Df
     if np.linalg.matrix_rank(CDf) < plant.q:
         raise DesignFailed(
             "the fast objective needs C*Df of full column rank (each fault seen in the output one sample "
             "after it starts); this plant does not have it: use --objective hinf")
-    target = np.vstack([(plant.A + np.eye(plant.n)) @ plant.Df, np.eye(plant.q)])
+    n, q, l = plant.n, plant.q, plant.l
+    target = np.vstack([(plant.A + np.eye(n)) @ plant.Df, np.eye(q)])
     LM = target @ np.linalg.pinv(CDf)
-    return LM[: plant.n], LM[plant.n :]
+    Pi = np.eye(l) - CDf @ np.linalg.pinv(CDf)
+    if np.linalg.matrix_rank(Pi) > 0:
+        A_o = np.block([[plant.A, plant.Df], [np.zeros((q, n)), np.eye(q)]])
+        C_o = np.hstack([plant.C, np.zeros((l, q))])
+        A1, H = A_o - LM @ C_o, Pi @ C_o
+        try:
+            X = scipy.linalg.solve_discrete_are(A1.T, H.T, np.eye(n + q), np.eye(l))
+            LM = LM + A1 @ X @ H.T @ np.linalg.solve(H @ X @ H.T + np.eye(l), Pi)
+        except (np.linalg.LinAlgError, ValueError):
+            pass  # no stabilising correction through Pi y: keep the minimum-norm observer, the search decides
+    return LM[:n], LM[n:]
 
 
 def mismatch_energy(plant: Plant, gains: Gains, steady, horizon: int = 60) -> float:
@@ -98,8 +120,8 @@ def _frozen_bounds(plant: Plant, gains: Gains, steady) -> tuple[float, float, fl
         rho = max(rho, float(np.max(np.abs(np.linalg.eigvals(loop.A)))))
         if rho >= 1.0:
             return np.inf, np.inf, rho
-        ge = max(ge, hinf_norm(loop.A, loop.B, loop.C_ef, points=256))
-        gz = max(gz, hinf_norm(loop.A, loop.B, loop.C_y, points=256))
+        e, z = hinf_norms(loop.A, loop.B, [loop.C_ef, loop.C_y], points=256)
+        ge, gz = max(ge, e), max(gz, z)
     return ge, gz, rho
 
 

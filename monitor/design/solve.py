@@ -62,15 +62,22 @@ class SolvePath:
     regularise: float = 0.0
 
     def problem_for(self, problem: cp.Problem) -> cp.Problem:
+        """The problem this path solves; a regularised variant is built once per problem and kept on it.
+
+        Kept because a problem with parameters (the H-infinity design's inner LMI, re-solved for every
+        controller candidate) is compiled once by cvxpy and then only re-filled: a variant built afresh at
+        each solve would be compiled again each time (seconds on a 4-state aircraft model).
+        """
         import cvxpy as cp
 
         if not self.regularise:
             return problem
-        traces = [cp.trace(v) for v in problem.variables() if v.ndim == 2 and v.is_symmetric()]
-        if not traces:
-            return problem
-        return cp.Problem(cp.Minimize(problem.objective.expr + self.regularise * cp.sum(cp.hstack(traces))),
-                          problem.constraints)
+        variants: dict[float, cp.Problem] = problem.__dict__.setdefault("_regularised_variants", {})
+        if self.regularise not in variants:
+            traces = [cp.trace(v) for v in problem.variables() if v.ndim == 2 and v.is_symmetric()]
+            variants[self.regularise] = problem if not traces else cp.Problem(
+                cp.Minimize(problem.objective.expr + self.regularise * cp.sum(cp.hstack(traces))), problem.constraints)
+        return variants[self.regularise]
 
 
 PATHS: tuple[SolvePath, ...] = (

@@ -42,7 +42,17 @@ def _E(plant: Plant) -> np.ndarray:
 
 
 def b0_of_tau(plant: Plant, tau: float) -> np.ndarray:
-    """``B0(tau)`` for a delay in ``[0, h)``; ``B1(tau)`` is ``input_sum(plant) - B0(tau)``."""
+    """``B0(tau)`` for a delay in ``[0, h)``; ``B1(tau)`` is ``input_sum(plant) - B0(tau)``.
+
+    Cached per (plant, tau): the design searches ask for the same few delays at every candidate, and each
+    costs two matrix exponentials. Plants are immutable and hash by identity; the copy keeps callers from
+    changing the cached matrix.
+    """
+    return _b0_of_tau(plant, float(tau)).copy()
+
+
+@lru_cache(maxsize=1024)
+def _b0_of_tau(plant: Plant, tau: float) -> np.ndarray:
     if plant.continuous is not None:
         return b0_b1(plant.continuous, plant.h, tau)[0]
     return plant.B0 + F_of_tau(curve_model(plant), plant.h, tau, plant.tau_bar) @ _E(plant)
