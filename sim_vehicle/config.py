@@ -9,6 +9,15 @@ A vehicle file holds the same names as the long flags (``-`` or ``_``), e.g.::
     loss = 0.02
     zenoh_connect = ["tcp/127.0.0.1:7447"]
 
+or, for a JSBSim aircraft::
+
+    aircraft = "c172p"
+    airspeed = 100
+    altitude = 3000
+    rate = 20
+    turbulence = "light"
+    excite = "prbs:1:60"
+
 Flags given on the command line win over the file. Why strict: an unknown key (``dealy``) silently
 ignored would run a different experiment than the one written down, so it is an error. The file is
 read by ``monitor.config_file``, the same reader as ``fault-monitor run --config``.
@@ -23,8 +32,9 @@ import numpy as np
 
 from monitor.config_file import apply_config_file  # the one reader of --config files (also fault-monitor run)
 from monitor.errors import UserError
-from monitor.plant import Plant, load_plant
+from monitor.model.plant import Plant, load_plant
 from monitor.wire.specs import DelaySampler, FaultSchedule, parse_delay_spec, parse_fault_spec
+from sim_vehicle.excitation import Excitation, parse_excite_spec
 from sim_vehicle.network import Impairment
 from sim_vehicle.wind import Wind, parse_wind_spec
 
@@ -33,9 +43,9 @@ __all__ = ["Settings", "apply_config_file", "settings_from_args", "parse_udpout"
 
 @dataclass(frozen=True)
 class Settings:
-    """Everything a run needs, validated."""
+    """Everything a run needs, validated. Exactly one of ``plant`` (linear) and ``aircraft`` (JSBSim) is set."""
 
-    plant: Plant
+    plant: Plant | None
     sysid: int
     steps: int | None
     speedup: float
@@ -50,6 +60,23 @@ class Settings:
     target: tuple[str, int]
     bind: tuple[str, int]
     autopilot: np.ndarray | None = None
+    aircraft: "AircraftSpec | None" = None  # noqa: F821 (sim_vehicle.jsbsim_model, imported lazily)
+    excite: Excitation | None = None
+
+    @property
+    def h(self) -> float:
+        return self.aircraft.h if self.aircraft is not None else self.plant.h  # type: ignore[union-attr]
+
+    @property
+    def vehicle(self) -> str:
+        """What flies, for log lines."""
+        if self.aircraft is not None:
+            return f"aircraft {self.aircraft.name}"
+        return f"plant {self.plant.name}"  # type: ignore[union-attr]
+
+
+AIRCRAFT_DEFAULTS = {"airspeed": 100.0, "altitude": 3000.0, "rate": 20.0, "turbulence": "none"}
+TURBULENCE_LEVELS = ("none", "light", "moderate", "severe")
 
 
 def parse_hostport(text: str, what: str) -> tuple[str, int]:
@@ -81,11 +108,48 @@ def _number(value, name: str) -> float:
         raise UserError(f"--{name} must be a number, got {value!r}") from None
 
 
+def _aircraft_spec(args: argparse.Namespace, seed: int):
+    """``--aircraft`` and its flags -> ``AircraftSpec`` (no JSBSim import: loading and trimming come later)."""
+    from sim_vehicle.jsbsim_model import DEFAULT_DT, AircraftSpec
+
+    name = str(args.aircraft)
+    for flag in ("plant", "wind", "x0", "autopilot"):
+        if getattr(args, flag, None) is not None:
+            why = {"plant": "one vehicle flies either a plant or an aircraft",
+                   "wind": "the aircraft flies in JSBSim's weather: use --turbulence",
+                   "x0": "the aircraft starts trimmed (--airspeed, --altitude)",
+                   "autopilot": "the on-board gain is for the linear plant; --excite flies an aircraft on board"}[flag]
+            raise UserError(f"--{flag.replace('_', '-')} does not go with --aircraft: {why}")
+    value = {k: AIRCRAFT_DEFAULTS[k] if getattr(args, k, None) is None else getattr(args, k) for k in AIRCRAFT_DEFAULTS}
+    airspeed, altitude, rate = (_number(value[k], k) for k in ("airspeed", "altitude", "rate"))
+    for flag, v in (("airspeed", airspeed), ("altitude", altitude), ("rate", rate)):
+        if not (v > 0 and np.isfinite(v)):
+            raise UserError(f"--{flag} must be positive, got {v:g}")
+    dt = DEFAULT_DT if getattr(args, "dt", None) is None else _number(args.dt, "dt")
+    if not 0 < dt <= 0.1:
+        raise UserError(f"--dt must be in (0, 0.1] seconds, got {dt:g}")
+    turbulence = str(value["turbulence"]).strip().lower()
+    if turbulence not in TURBULENCE_LEVELS:
+        raise UserError(f"--turbulence must be one of {', '.join(TURBULENCE_LEVELS)}, got '{value['turbulence']}'")
+    return AircraftSpec(name=name, aircraft_dir=getattr(args, "aircraft_dir", None), airspeed_kt=airspeed,
+                        altitude_ft=altitude, h=1.0 / rate, dt=dt, turbulence=turbulence, seed=seed)
+
+
 def settings_from_args(args: argparse.Namespace) -> Settings:
     """Validate the parsed flags into ``Settings`` (one-line ``UserError`` on anything wrong)."""
-    plant = load_plant(args.plant)
-    if plant.continuous is None:
-        raise UserError(f"--plant {args.plant}: the simulator needs a continuous plant (try paper-continuous)")
+    seed = int(args.seed)
+    aircraft = None
+    if getattr(args, "aircraft", None) is not None:
+        aircraft = _aircraft_spec(args, seed)
+        plant, h = None, aircraft.h
+    else:
+        for flag in ("aircraft_dir", *AIRCRAFT_DEFAULTS, "dt"):
+            if getattr(args, flag, None) is not None:
+                raise UserError(f"--{flag.replace('_', '-')} goes with --aircraft NAME (a JSBSim aircraft)")
+        plant = load_plant(args.plant or "paper-continuous")
+        if plant.continuous is None:
+            raise UserError(f"--plant {args.plant}: the simulator needs a continuous plant (try paper-continuous)")
+        h = plant.h
     sysid = int(args.sysid)
     if not 1 <= sysid <= 255:
         raise UserError(f"--sysid must be in 1..255 (MAVLink system ids), got {sysid}")
@@ -95,11 +159,13 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
     speedup = _number(args.speedup, "speedup")
     if not speedup > 0:
         raise UserError(f"--speedup must be positive, got {speedup:g}")
-    seed = int(args.seed)
     # CONTRACT.md's default, uniform:0:0.46 for h = 1 s, kept inside the plant's own delay interval
-    delay_text = args.delay or f"uniform:{plant.tau_min:g}:{min(0.46 * plant.h, plant.tau_max):g}"
+    if plant is not None:
+        delay_text = args.delay or f"uniform:{plant.tau_min:g}:{min(0.46 * plant.h, plant.tau_max):g}"
+    else:
+        delay_text = args.delay or f"uniform:0:{0.46 * h:g}"
     x0 = None
-    if args.x0 is not None:
+    if args.x0 is not None and plant is not None:
         parts = args.x0 if isinstance(args.x0, list) else str(args.x0).split(",")
         x0 = [_number(v, "x0") for v in parts]
         if len(x0) != plant.n:
@@ -107,6 +173,9 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
     noise = _number(args.sensor_noise, "sensor-noise")
     if noise < 0:
         raise UserError(f"--sensor-noise must be >= 0, got {noise:g}")
+    excite = parse_excite_spec(getattr(args, "excite", None))
+    if excite is not None and getattr(args, "autopilot", None) is not None:
+        raise UserError("--excite and --autopilot both fly the vehicle on board: choose one")
     return Settings(
         plant=plant,
         sysid=sysid,
@@ -117,15 +186,17 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
         delay_split=_probability(args.delay_split, "delay-split"),
         impairment=Impairment(
             loss=_probability(args.loss, "loss"), duplicate=_probability(args.duplicate, "duplicate"),
-            reorder=_probability(args.reorder, "reorder"), h=plant.h, seed=seed,
+            reorder=_probability(args.reorder, "reorder"), h=h, seed=seed,
         ),
-        wind=parse_wind_spec(args.wind, plant.h, seed),
+        wind=parse_wind_spec(args.wind or "paper", h, seed) if plant is not None else Wind(oscillator=False, h=h),
         sensor_noise=noise,
         seed=seed,
         x0=x0,
         target=parse_udpout(args.mavlink),
         bind=parse_hostport(args.bind, "--bind"),
-        autopilot=_autopilot_gain(getattr(args, "autopilot", None), plant),
+        autopilot=_autopilot_gain(getattr(args, "autopilot", None), plant) if plant is not None else None,
+        aircraft=aircraft,
+        excite=excite,
     )
 
 

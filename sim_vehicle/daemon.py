@@ -25,8 +25,10 @@ from monitor.wire.mavlink import (
     encode_sample,
     new_codec,
 )
+from sim_vehicle.flight_model import FlightModelError
 from sim_vehicle.link import CommandDecoder
 from sim_vehicle.simulation import Simulation
+from sim_vehicle.telemetry import AircraftSample, encode_aircraft_sample
 from sim_vehicle.truth import TruthPublisher
 
 __all__ = ["UdpSink", "VehicleProtocol", "run_daemon"]
@@ -60,7 +62,10 @@ class UdpSink:
             log.debug("send failed: %s", exc)
 
     def send_sample(self, sample: Sample) -> None:
-        self._send(encode_sample(self.mav, sample, self.h))
+        if isinstance(sample, AircraftSample):
+            self._send(encode_aircraft_sample(self.mav, sample, self.h))
+        else:
+            self._send(encode_sample(self.mav, sample, self.h))
 
     def send_heartbeat(self) -> None:
         if self.key is not None:  # keep both signing clocks at wall-clock time (see the ecosystem notes)
@@ -98,6 +103,7 @@ class _Daemon:
         self.wake = asyncio.Event()
         self.stop = asyncio.Event()
         self.icmp_errors = 0
+        self.failure: FlightModelError | None = None  # the flight model could not go on (a crash): stop, report
 
     def now(self) -> float:
         return (self.loop.time() - self.start) * self.speedup
@@ -113,6 +119,9 @@ class _Daemon:
                 outcome = self.sim.receive_command(cmd.k, cmd.elevator_deg, t)
                 log.debug("command k=%d u=%.4f at t=%.4f: %s", cmd.k, cmd.elevator_deg, t, outcome)
             self.wake.set()
+        except FlightModelError as exc:  # the aircraft crashed while the command was being brought up to time
+            self.failure = exc
+            self.request_stop()
         except Exception:  # one bad packet costs a log line, never the loop
             log.exception("error handling a datagram from %s", addr)
 
@@ -132,6 +141,8 @@ class _Daemon:
                 await asyncio.wait_for(self.wake.wait(), timeout)
             except TimeoutError:
                 pass
+        if self.failure is not None:
+            raise self.failure
 
 
 async def run_daemon(sim: Simulation, decoder: CommandDecoder, truth: TruthPublisher, *, target: tuple[str, int],
@@ -156,5 +167,5 @@ async def run_daemon(sim: Simulation, decoder: CommandDecoder, truth: TruthPubli
         sim.stats.packets.update(decoder.packets)
         sim.stats.commands.update(decoder.commands)
         sim.stats.packets["send_errors"] += sink.errors + daemon.icmp_errors
-        if daemon.stop.is_set():
+        if daemon.stop.is_set() and daemon.failure is None:
             log.info("stopped by signal at simulated t = %.3f s", daemon.now())

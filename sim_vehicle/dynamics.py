@@ -1,32 +1,36 @@
-"""Exact integration of the continuous plant between events, with the elevator as a physical actuator.
+"""The linear flight model (exact between events) and the elevator servo that drives any flight model.
 
-Why exact: the monitor is judged against this simulator, so integration error must not masquerade as a
-fault. Between two events (a sampling instant, a command reaching the actuator, the surface reaching a
-rate-limited target) every input is affine in time, and
+``LinearFlightModel``: the continuous plant of a plant file. Why exact: the monitor is judged against this
+simulator, so integration error must not masquerade as a fault. Between two events (a sampling instant, a
+command reaching the actuator, the surface reaching a rate-limited target) every input is affine in time,
+and
 
     x(t0 + T) = e^{A_c T} x0 + Gamma1(T) (B_c u0 + w) + Gamma2(T) B_c r,
     Gamma1(T) = int_0^T e^{A_c s} ds,   Gamma2(T) = int_0^T e^{A_c s} (T - s) ds,
 
 for ``u(t0 + s) = u0 + r s`` and the constant ``w = D_cf f(k) + D_cd d(k)``. All three matrices come from
-one exponential of a Van Loan block matrix (the same idea as ``monitor.discretize.integral_expm``, one
+one exponential of a Van Loan block matrix (the same idea as ``monitor.model.discretize.integral_expm``, one
 block larger for the ramp), so there are no Euler steps and no quadrature tolerance.
 
-The actuator: the commanded deflection is clipped to ``actuator.limit``; with ``actuator.rate_limit`` the
-surface slews towards it at that rate (a ramp segment), otherwise it jumps. A ``stuck`` fault freezes
-the surface; ``loe`` scales its effect (``u_eff = effectiveness * position``) while its measured
-position is unchanged, as for a damaged surface whose position sensor still reads the servo.
+``Airframe``: the elevator servo and the deflection faults, in front of any ``FlightModel`` (the linear plant
+or a JSBSim aircraft). The commanded deflection is clipped to the surface's travel; with a rate limit the
+surface slews towards it (a ramp segment), otherwise it jumps. A ``stuck`` fault freezes the surface;
+``loe`` scales its effect (``u_eff = effectiveness * position``) while its measured position is unchanged,
+as for a damaged surface whose position sensor still reads the servo. The additive fault ``f`` and the
+wind ``d`` are held over each sampling interval and handed to the model with the deflection.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from typing import Sequence
 
 import numpy as np
 from scipy.linalg import expm
 
-from monitor.plant import Actuator, ContinuousModel
+from monitor.model.plant import Actuator, ContinuousModel, Plant
+from sim_vehicle.flight_model import FlightModel, Outputs
 
-__all__ = ["segment_matrices", "Airframe"]
+__all__ = ["segment_matrices", "LinearFlightModel", "Airframe"]
 
 
 def segment_matrices(A_c: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -40,73 +44,62 @@ def segment_matrices(A_c: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray,
     return E[:n, :n], E[:n, n : 2 * n], E[:n, 2 * n :]
 
 
-@dataclass
-class Airframe:
-    """The vehicle's true state ``x(t)`` and elevator, advanced exactly from event to event.
+class LinearFlightModel:
+    """``x' = A_c x + B_c u + D_cf f + D_cd d`` integrated exactly; ``x`` is the deviation from trim.
 
-    Call ``set_interval`` at each sampling instant (fault and wind are held over the interval),
-    ``command`` when a command reaches the actuator, and ``advance_to`` before either, with
-    non-decreasing times.
+    A ``FlightModel``: the fault ``f`` enters through ``D_cf`` and the wind ``d`` through ``D_cd`` (the paper's
+    model), the deflection through ``B_c``.
     """
 
-    model: ContinuousModel
-    actuator: Actuator = field(default_factory=Actuator)
-    x: np.ndarray = field(default=None)  # type: ignore[assignment]
-    t: float = 0.0
-    position: float = 0.0  # measured surface deflection, plant units
-    target: float = 0.0  # commanded deflection after clipping
-    effectiveness: float = 1.0
-    stuck: bool = False
-    w: np.ndarray = field(default=None)  # type: ignore[assignment]
-    _cache: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict, repr=False)
+    def __init__(self, model: ContinuousModel, h: float = 1.0, actuator: Actuator | None = None,
+                 x: Sequence[float] | None = None, name: str = "linear", unit: str = "deg") -> None:
+        self.model = model
+        self.h = float(h)
+        self.name = name
+        self.unit = unit
+        n = model.A_c.shape[0]
+        self.x = np.zeros(n) if x is None else np.asarray(x, dtype=float).copy()
+        if self.x.shape != (n,):
+            raise ValueError(f"the initial state needs {n} values, got {self.x.size}")
+        actuator = actuator or Actuator()
+        limit = actuator.limit
+        self.travel = (-limit, limit) if limit is not None else (None, None)
+        self.rate_limit = actuator.rate_limit
+        self.trim_deflection = 0.0
+        self.n_faults = model.D_cf.shape[1]
+        self.n_wind = model.D_cd.shape[1]
+        self.state_names = ("alpha_deg", "q_deg_s") if n == 2 else tuple(f"x{i + 1}" for i in range(n))
+        self.t = 0.0
+        self._cache: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
-    def __post_init__(self) -> None:
-        n = self.model.A_c.shape[0]
-        self.x = np.zeros(n) if self.x is None else np.asarray(self.x, dtype=float).copy()
-        self.w = np.zeros(n)
+    @classmethod
+    def from_plant(cls, plant: Plant, x0: Sequence[float] | None = None) -> "LinearFlightModel":
+        if plant.continuous is None:
+            raise ValueError("the simulator needs a continuous plant (form = \"continuous\")")
+        return cls(plant.continuous, plant.h, plant.actuator, x0, plant.name, plant.unit)
 
-    def set_interval(self, f: np.ndarray, d: np.ndarray, effectiveness: float = 1.0,
-                     stuck: bool = False, stuck_value: float | None = None) -> None:
-        """Hold fault ``f`` and wind ``d`` from now on; apply the deflection faults of this interval."""
-        self.w = self.model.D_cf @ np.asarray(f, dtype=float) + self.model.D_cd @ np.asarray(d, dtype=float)
-        self.effectiveness = float(effectiveness)
-        if stuck and not self.stuck and stuck_value is not None:
-            self.position = float(stuck_value)
-        released = self.stuck and not stuck
-        self.stuck = stuck
-        if released and self.actuator.rate_limit is None:
-            self.position = self.target  # a freed servo goes to its current command (slews if rate-limited)
-
-    def command(self, u: float) -> None:
-        """A command reaches the actuator now: clip it and move (or start slewing) the surface."""
-        limit = self.actuator.limit
-        self.target = float(np.clip(u, -limit, limit)) if limit is not None else float(u)
-        if not self.stuck and self.actuator.rate_limit is None:
-            self.position = self.target
-
-    def advance_to(self, t: float) -> None:
-        """Integrate exactly from ``self.t`` to ``t`` (splitting where a slewing surface reaches its target)."""
-        if t < self.t - 1e-12:
-            raise ValueError(f"time goes backwards: {t} < {self.t}")
-        while t > self.t:
-            T = t - self.t
-            rate = 0.0
-            gap = self.target - self.position
-            slewing = not self.stuck and self.actuator.rate_limit is not None and gap != 0.0
-            if slewing:
-                rate = float(np.sign(gap)) * self.actuator.rate_limit
-                T = min(T, abs(gap) / self.actuator.rate_limit)
-            self._integrate(T, rate)
-            if slewing:
-                done = T >= abs(gap) / self.actuator.rate_limit
-                self.position = self.target if done else self.position + rate * T
-            self.t = t if T >= t - self.t else self.t + T
-
-    def _integrate(self, T: float, rate: float) -> None:
+    def step(self, T: float, deflection: float, rate: float, f: Sequence[float], d: Sequence[float]) -> None:
         phi, g1, g2 = self._matrices(T)
         B = self.model.B_c[:, 0]
-        u0 = self.effectiveness * self.position
-        self.x = phi @ self.x + g1 @ (B * u0 + self.w) + g2 @ (B * (self.effectiveness * rate))
+        w = self.model.D_cf @ np.asarray(f, dtype=float) + self.model.D_cd @ np.asarray(d, dtype=float)
+        self.x = phi @ self.x + g1 @ (B * deflection + w) + g2 @ (B * rate)
+        self.t += T
+
+    def state(self) -> list[float]:
+        return self.x.tolist()
+
+    def outputs(self) -> Outputs:
+        x = self.x
+        return Outputs(alpha_deg=float(x[0]), q_deg_s=float(x[1]) if x.size > 1 else 0.0)
+
+    def disturbance(self) -> list[float]:
+        return []
+
+    def truth_extras(self) -> dict:
+        return {}
+
+    def close(self) -> None:
+        pass
 
     def _matrices(self, T: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         key = round(T, 12)
@@ -116,6 +109,81 @@ class Airframe:
                 self._cache.clear()
             hit = self._cache[key] = segment_matrices(self.model.A_c, T)
         return hit
+
+
+def _clip(u: float, low: float | None, high: float | None) -> float:
+    if low is not None and u < low:
+        return float(low)
+    if high is not None and u > high:
+        return float(high)
+    return float(u)
+
+
+class Airframe:
+    """A flight model and its elevator servo, advanced from event to event.
+
+    Call ``set_interval`` at each sampling instant (fault and wind are held over the interval),
+    ``command`` when a command reaches the actuator, and ``advance_to`` before either, with
+    non-decreasing times. ``Airframe(ContinuousModel, Actuator, x=...)`` builds the linear model.
+    """
+
+    def __init__(self, model: FlightModel | ContinuousModel, actuator: Actuator | None = None,
+                 x: Sequence[float] | None = None) -> None:
+        if isinstance(model, ContinuousModel):
+            model = LinearFlightModel(model, actuator=actuator, x=x)
+        elif actuator is not None or x is not None:
+            raise ValueError("actuator and x belong to the linear model; a FlightModel brings its own")
+        self.flight: FlightModel = model
+        self.low, self.high = model.travel
+        self.rate_limit = model.rate_limit
+        self.t = model.t
+        self.position = float(model.trim_deflection)  # measured surface deflection, plant units
+        self.target = self.position  # commanded deflection after clipping (trim until the first command)
+        self.effectiveness = 1.0
+        self.stuck = False
+        self.f = np.zeros(model.n_faults)
+        self.d = np.zeros(model.n_wind)
+
+    @property
+    def x(self) -> np.ndarray:
+        return np.asarray(self.flight.state())
+
+    def set_interval(self, f: Sequence[float], d: Sequence[float], effectiveness: float = 1.0,
+                     stuck: bool = False, stuck_value: float | None = None) -> None:
+        """Hold fault ``f`` and wind ``d`` from now on; apply the deflection faults of this interval."""
+        self.f = np.asarray(f, dtype=float)
+        self.d = np.asarray(d, dtype=float)
+        self.effectiveness = float(effectiveness)
+        if stuck and not self.stuck and stuck_value is not None:
+            self.position = float(stuck_value)
+        released = self.stuck and not stuck
+        self.stuck = stuck
+        if released and self.rate_limit is None:
+            self.position = self.target  # a freed servo goes to its current command (slews if rate-limited)
+
+    def command(self, u: float) -> None:
+        """A command reaches the actuator now: clip it to the travel and move (or start slewing) the surface."""
+        self.target = _clip(u, self.low, self.high)
+        if not self.stuck and self.rate_limit is None:
+            self.position = self.target
+
+    def advance_to(self, t: float) -> None:
+        """Fly from ``self.t`` to ``t`` (splitting where a slewing surface reaches its target)."""
+        if t < self.t - 1e-12:
+            raise ValueError(f"time goes backwards: {t} < {self.t}")
+        while t > self.t:
+            T = t - self.t
+            rate = 0.0
+            gap = self.target - self.position
+            slewing = not self.stuck and self.rate_limit is not None and gap != 0.0
+            if slewing:
+                rate = float(np.sign(gap)) * self.rate_limit
+                T = min(T, abs(gap) / self.rate_limit)
+            self.flight.step(T, self.effectiveness * self.position, self.effectiveness * rate, self.f, self.d)
+            if slewing:
+                done = T >= abs(gap) / self.rate_limit
+                self.position = self.target if done else self.position + rate * T
+            self.t = t if T >= t - self.t else self.t + T
 
     @property
     def u_effective(self) -> float:

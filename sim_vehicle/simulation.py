@@ -22,10 +22,18 @@ the actuator holds its last value for the next interval too (the paper leaves ``
 work; holding is what a real servo with a stale-command rule does). A sample never answered by ``(k+1) h``
 is lost. A command for a sample older than the last applied one, or a repeat of it, is stale and ignored.
 
-On-board autopilot (``autopilot``, a gain K with u(k) = K y(k)): the vehicle flies itself, as in an
-observe-only run. At sample k it issues u(k) from its own measurement, saturated at the actuator limit,
-reports it in that sample's ACTUATOR_OUTPUT_STATUS (the contract's observe-only meaning) and applies it at
-``k h + tau(k)`` (the emulated on-board delay). Commands from outside are counted and ignored.
+On-board commands. With ``autopilot`` (a gain K with u(k) = K y(k), linear plant only) the vehicle flies
+itself, as in an observe-only run; with ``excite`` (``--excite prbs:AMP:SECONDS``) it flies an identification
+manoeuvre, trim +- AMP, for SECONDS, then issues trim once and goes back to commands from outside. At sample
+k the on-board command is issued, saturated at the surface's travel, reported in that sample's
+ACTUATOR_OUTPUT_STATUS (the contract's observe-only meaning) and applied at ``k h + tau(k)`` (the emulated
+on-board delay). Meanwhile commands from outside are counted (``ignored_autopilot``, ``ignored_excitation``)
+and ignored.
+
+What flies is a ``FlightModel`` (``sim_vehicle/flight_model.py``): the linear plant built from ``plant``
+(the default), or any model handed in as ``model`` (a JSBSim aircraft). Its servo and the faults at the
+surface are ``Airframe``'s; the wind ``d(k)`` comes from ``wind`` for a model that takes it (the linear
+plant), and from the model itself otherwise (JSBSim's turbulence, reported in the truth's ``d``).
 """
 
 from __future__ import annotations
@@ -38,12 +46,15 @@ from typing import Callable, Iterator, Protocol
 
 import numpy as np
 
-from monitor.plant import Plant
+from monitor.model.plant import Plant
 from monitor.wire.mavlink import Sample
 from monitor.wire.specs import DelaySampler, FaultSchedule, parse_delay_spec
-from sim_vehicle.dynamics import Airframe
+from sim_vehicle.dynamics import Airframe, LinearFlightModel
+from sim_vehicle.excitation import Excitation
+from sim_vehicle.flight_model import FlightModel, Outputs
 from sim_vehicle.network import DOWNLINK, UPLINK, Impairment
 from sim_vehicle.stats import RunStats
+from sim_vehicle.telemetry import AircraftSample
 from sim_vehicle.wind import Wind
 
 __all__ = ["Sink", "Simulation", "SampleTruth"]
@@ -74,6 +85,7 @@ class SampleTruth:
     tau_drawn: float
     tau: float | None = None
     late: bool = False
+    extras: dict = field(default_factory=dict)  # the model's own keys (an aircraft: surface, trim, ...)
 
     def payload(self, sysid: int, u: float, unit: str) -> dict:
         """The contract's truth payload plus extras (``status``, ``tau_drawn``, ``u``, ``elevator``, ...)."""
@@ -81,7 +93,7 @@ class SampleTruth:
         return {
             "sysid": sysid, "k": self.k, "t": self.t, "x": self.x, "f": self.f, "d": self.d, "tau": self.tau,
             "status": status, "tau_drawn": self.tau_drawn, "u": [u], "elevator": self.elevator,
-            "effectiveness": self.effectiveness, "stuck": self.stuck, "unit": unit,
+            "effectiveness": self.effectiveness, "stuck": self.stuck, "unit": unit, **self.extras,
         }
 
 
@@ -89,7 +101,7 @@ class SampleTruth:
 class Simulation:
     """One vehicle. Drive it with ``run_until(t)`` and ``receive_command(k, u, t_arrival)``."""
 
-    plant: Plant
+    plant: Plant | None
     sink: Sink
     sysid: int = 1
     steps: int | None = None
@@ -103,15 +115,23 @@ class Simulation:
     x0: list[float] | None = None
     autopilot: np.ndarray | None = None  # m x l gain of the on-board controller (None: flown by commands)
     stats: RunStats = field(default_factory=RunStats)
+    model: FlightModel | None = None  # what flies (None: the linear plant of ``plant``)
+    excite: Excitation | None = None  # an on-board identification manoeuvre at the start
 
     def __post_init__(self) -> None:
-        if self.plant.continuous is None:
-            raise ValueError("the simulator needs a continuous plant (form = \"continuous\")")
-        self.h = self.plant.h
-        self.airframe = Airframe(self.plant.continuous, self.plant.actuator, x=self.x0)
+        if self.model is None:
+            if self.plant is None:
+                raise ValueError("a Simulation needs a plant or a flight model")
+            self.model = LinearFlightModel.from_plant(self.plant, self.x0)
+        if self.autopilot is not None and self.plant is None:
+            raise ValueError("the on-board autopilot u = K y needs the linear plant's C")
+        self.h = self.model.h
+        self.unit = self.model.unit
+        self.airframe = Airframe(self.model)
         self._queue: list[tuple[float, int, Callable, tuple]] = []
         self._seq = itertools.count()
-        self._wind: Iterator[float] = self.wind.values()
+        self._wind: Iterator[float] | None = self.wind.values() if self.model.n_wind else None
+        self._excite: list[int] = self.excite.signs(self.h, self.seed) if self.excite is not None else []
         self._pending: dict[int, SampleTruth] = {}
         self._arrivals: Counter = Counter()
         self.k = -1  # last sample taken
@@ -139,6 +159,8 @@ class Simulation:
         self.stats.commands["received"] += 1
         if self.autopilot is not None:
             return self._count("ignored_autopilot")
+        if self._excite and k <= len(self._excite):
+            return self._count("ignored_excitation")
         if k <= self.last_applied:
             return self._count("stale")
         if k > self.k or k < 0:
@@ -166,27 +188,39 @@ class Simulation:
         return what
 
     def _sample(self, t: float, k: int) -> None:
+        model = self.model
         self.airframe.advance_to(t)
         self._settle(k - 1)
         self.k = k
-        f = self.fault.f_vector(k, self.plant.q)
-        d = [next(self._wind)] + [0.0] * (self.plant.p - 1)
+        x = model.state()
+        outputs = model.outputs()
+        f = self.fault.f_vector(k, model.n_faults)
+        if self._wind is not None:
+            d = [next(self._wind)] + [0.0] * (model.n_wind - 1)
+            held = d
+        else:
+            d, held = model.disturbance(), []
         stuck = self.fault.stuck(k)
-        self.airframe.set_interval(np.array(f), np.array(d), self.fault.effectiveness(k), stuck is not None,
+        self.airframe.set_interval(np.array(f), np.array(held), self.fault.effectiveness(k), stuck is not None,
                                    None if stuck is None else stuck.value)
         tau = self.delay.tau(k)
-        x = self.airframe.x.tolist()
         truth = SampleTruth(k=k, t=t, x=x, f=f, d=d, elevator=self.airframe.position,
-                            effectiveness=self.airframe.effectiveness, stuck=self.airframe.stuck, tau_drawn=tau)
+                            effectiveness=self.airframe.effectiveness, stuck=self.airframe.stuck, tau_drawn=tau,
+                            extras=model.truth_extras())
         self._pending[k] = truth
         self.stats.samples["taken"] += 1
         self.stats.tau_drawn.append(tau)
         measured = self._measure(k, x)
         reported = self.airframe.position
+        onboard = None
         if self.autopilot is not None:
-            reported = self._autopilot(t, k, tau, measured)
-        sample = Sample(sysid=self.sysid, k=k, t=t, alpha_deg=measured[0], q_deg_s=measured[1],
-                        elevator_deg=reported)
+            onboard = float((self.autopilot @ (self.plant.C @ np.asarray(measured))).ravel()[0])
+        elif k <= len(self._excite) and self.excite is not None:  # the manoeuvre, then trim once
+            level = self._excite[k] * self.excite.amplitude if k < len(self._excite) else 0.0
+            onboard = model.trim_deflection + level
+        if onboard is not None:
+            reported = self._onboard(t, k, tau, onboard)
+        sample = self._telemetry(k, t, measured, outputs, reported)
         fate = self.impairment.fate(UPLINK, k)
         if not fate:
             self.stats.samples["dropped"] += 1
@@ -199,20 +233,34 @@ class Simulation:
         else:
             self._push((k + 1) * self.h, self._finish, k + 1)
 
-    def _autopilot(self, t: float, k: int, tau: float, measured: list[float]) -> float:
-        """Issue the on-board command for sample k; it acts after the drawn delay. Returns u(k)."""
-        u = float((self.autopilot @ (self.plant.C @ np.asarray(measured))).ravel()[0])
-        limit = self.plant.actuator.limit
-        if limit is not None:
-            u = min(max(u, -limit), limit)
+    def _onboard(self, t: float, k: int, tau: float, u: float) -> float:
+        """Issue the on-board command u(k), saturated at the travel; it acts after the drawn delay. Returns it."""
+        low, high = self.airframe.low, self.airframe.high
+        if low is not None:
+            u = max(u, low)
+        if high is not None:
+            u = min(u, high)
         self._push(t + tau, self._apply, k, u)
         return u
 
+    def _telemetry(self, k: int, t: float, measured: list[float], outputs: Outputs, reported: float) -> Sample:
+        """The sample as sent: noise (if any) on alpha and q; an aircraft's full attitude and VFR_HUD."""
+        alpha = measured[0]
+        q = measured[1] if len(measured) > 1 else 0.0
+        if outputs.theta_deg is None:
+            return Sample(sysid=self.sysid, k=k, t=t, alpha_deg=alpha, q_deg_s=q, elevator_deg=reported)
+        return AircraftSample(sysid=self.sysid, k=k, t=t, alpha_deg=alpha, q_deg_s=q, elevator_deg=reported,
+                              theta_deg=outputs.theta_deg, airspeed_m_s=outputs.airspeed_m_s or 0.0,
+                              attitude=outputs.attitude or (0.0, 0.0, 0.0, 0.0),
+                              hud=outputs.hud or (0.0, 0.0, 0, 0.0, 0.0))
+
     def _measure(self, k: int, x: list[float]) -> list[float]:
+        """The state as measured: seeded white noise on the linear plant's states, on an aircraft's alpha and q."""
         if self.sensor_noise <= 0:
             return x
         rng = np.random.default_rng([self.seed, 0x5E5, k])
-        return (np.asarray(x) + rng.normal(0.0, self.sensor_noise, size=len(x))).tolist()
+        noisy = len(x) if isinstance(self.model, LinearFlightModel) else 2  # an aircraft's alpha and q only
+        return (np.asarray(x[:noisy]) + rng.normal(0.0, self.sensor_noise, size=noisy)).tolist() + x[noisy:]
 
     def _send(self, t: float, sample: Sample) -> None:
         self.stats.samples["sent"] += 1
@@ -236,7 +284,7 @@ class Simulation:
         self._arrivals.pop(k - 2, None)
         if truth is None:
             return
-        payload = truth.payload(self.sysid, self.airframe.target, self.plant.unit)
+        payload = truth.payload(self.sysid, self.airframe.target, self.unit)
         self.stats.samples[payload["status"]] += 1
         self.sink.publish_truth(payload)
 

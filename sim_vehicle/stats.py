@@ -62,7 +62,8 @@ class RunStats:
             f"  per sample: answered in time {s['applied']}, late {s['late']}, lost (never answered) {s['lost']}",
             f"  commands: received {c['received']}, applied {c['applied']}, late {c['late']}, "
             f"stale/duplicate {c['stale']}, dropped by link {c['dropped']}, for a future sample {c['future']}, "
-            f"other system {c['foreign_target']}",
+            f"other system {c['foreign_target']}, ignored while flying on board (autopilot/excitation) "
+            f"{c['ignored_autopilot'] + c['ignored_excitation']}",
             f"  packets: rejected by signing {p['rejected_signature']}, garbage {p['garbage']}, "
             f"truncated {p['truncated']}, other messages {p['other']}, send errors {p['send_errors']}",
             f"  tau (true, applied commands): {fmt(delay_stats(self.tau))}",

@@ -1,0 +1,354 @@
+"""A JSBSim aircraft as a ``FlightModel``: nonlinear 6-DOF, trimmed by JSBSim, flown at JSBSim's own step.
+
+Loading. ``--aircraft NAME`` is any aircraft JSBSim ships (``c172p``, ``737``, ``J3Cub``...) or, with
+``--aircraft-dir DIR``, the user's own: DIR may be a JSBSim root (``DIR/aircraft/NAME/NAME.xml``, with its
+``engine/`` and ``systems/``), a directory of aircraft (``DIR/NAME/NAME.xml``; engines and systems then come
+from JSBSim's bundled set unless the aircraft has its own), or the aircraft's own folder (``DIR/NAME.xml``).
+
+Trim. Level flight (flight-path angle 0) at ``--airspeed`` knots calibrated and ``--altitude`` feet above sea
+level, engines running, JSBSim's full trim (``simulation/do_simple_trim = 1``: throttle, elevator via the pitch
+trim, aileron, rudder, attitude). An aircraft that does not trim there is a ``UserError`` quoting JSBSim's
+``TrimFailureError`` and the reason JSBSim printed (e.g. "udot doesn't appear to be trimmable").
+
+The elevator. The servo (``sim_vehicle.dynamics.Airframe``) works in absolute degrees of surface deflection,
+trim included, so the surface is driven by deflection, not by stick. JSBSim's aerodynamics read
+``fcs/elevator-pos-rad``, which the aircraft's own flight-control system writes on every step: writing it
+from outside has no effect (tested on c172p, 737 and J3Cub: the next step overwrites it). So the deflection is
+commanded through ``fcs/elevator-cmd-norm`` with the aircraft's own scaling, found numerically: a second,
+throw-away instance of the same aircraft, trimmed the same way, is probed with integration suspended for the
+deflection each command in [-1, 1] gives (81 points; c172p: -28 deg at -1, +23 deg at +1, piecewise linear).
+Probing the flying instance instead is not harmless: JSBSim's multi-step integrators keep the accelerations
+of the probe in their history (measured: q wandered to 0.08 deg/s instead of 7e-4 deg/s in 10 s at trim).
+After the trim, the pitch trim JSBSim set is moved into the command (``pitch-trim-cmd-norm`` = 0, the command
+= their sum), which leaves the surface where it was. A deflection is then turned into a command by
+interpolating the probed map; the travel the map spans is the servo's travel. An aircraft whose map is not
+monotone, spans less than a degree, or does not reproduce the trim deflection (a fly-by-wire pitch channel
+such as the f16's) is refused. The deflection acting includes the additive fault (``bias``/``ramp`` act at the
+surface, after the servo) and is read back from ``fcs/elevator-pos-deg`` for the truth stream.
+
+Time. JSBSim integrates at a fixed step ``dt`` (1/120 s unless ``--dt``; made the largest step not above it
+that divides h, so every sampling instant k h is a step boundary). An event at time t takes effect at the
+step boundary nearest t (at most dt/2 away); states are read as JSBSim left them after its last step.
+
+Turbulence: JSBSim's MIL-F-8785C Dryden model (``atmosphere/turb-type`` = 3, "Milspec") with the intensities
+JSBSim documents in FGWinds.h: light 25 ft/s at 20 ft AGL and probability-of-exceedance curve 3, moderate
+50 ft/s and 4, severe 75 ft/s and 6. Its random generator is seeded from ``--seed`` through
+``simulation/randomseed`` (a minimal-standard LCG: seeds 0 and 1 would be the same stream, so seed s is
+mapped to 1 + s mod (2^31 - 2)). Same seed, same flight, to the bit (tested).
+
+JSBSim is imported here, lazily, so that ``import sim_vehicle`` and ``sim-vehicle --help`` never load it, and
+everything it prints (its banner, loading and trim messages go to the C++ stdout) is captured while loading
+and trimming, logged at DEBUG, and kept off the daemon's stdout.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import logging
+import math
+import os
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator, Sequence
+
+import numpy as np
+
+from monitor.errors import UserError
+from sim_vehicle.flight_model import FlightModelError, Outputs
+
+__all__ = ["AircraftSpec", "JSBSimFlightModel", "TURBULENCE", "DEFAULT_DT", "jsbsim_seed", "step_size"]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_DT = 1.0 / 120.0
+KT_TO_M_S = 1852.0 / 3600.0
+FT_TO_M = 0.3048
+# (windspeed at 20 ft AGL in ft/s, probability-of-exceedance curve): JSBSim's own table (FGWinds.h)
+TURBULENCE: dict[str, tuple[float, int] | None] = {
+    "none": None, "light": (25.0, 3), "moderate": (50.0, 4), "severe": (75.0, 6),
+}
+MILSPEC = 3  # atmosphere/turb-type: ttMilspec (Dryden spectrum, MIL-F-8785C)
+_PROBE = np.linspace(-1.0, 1.0, 81)  # commands probed for the elevator's scaling (0 and the ends included)
+_LCG_MODULUS = 2**31 - 1
+
+
+@dataclass(frozen=True)
+class AircraftSpec:
+    """What to fly and where: everything ``JSBSimFlightModel`` needs, validated by the caller."""
+
+    name: str
+    aircraft_dir: str | None = None
+    airspeed_kt: float = 100.0
+    altitude_ft: float = 3000.0
+    h: float = 0.05
+    dt: float = DEFAULT_DT
+    turbulence: str = "none"
+    seed: int = 0
+
+
+def jsbsim_seed(seed: int) -> int:
+    """``--seed`` -> ``simulation/randomseed``: distinct for distinct seeds below 2^31 - 2, never 0 (== 1)."""
+    return 1 + int(seed) % (_LCG_MODULUS - 1)
+
+
+def step_size(h: float, dt: float = DEFAULT_DT) -> float:
+    """The largest step not above ``dt`` that divides ``h`` (so every sampling instant is a step boundary)."""
+    return h / max(1, math.ceil(h / dt - 1e-9))
+
+
+def _import_jsbsim():
+    try:
+        import jsbsim
+    except ImportError:  # pragma: no cover - jsbsim is a dependency
+        raise UserError("--aircraft needs the jsbsim package (pip install 'jsbsim>=1.3.3,<1.4')") from None
+    jsbsim.FGJSBBase().debug_lvl = 0  # no banner on construction (a class-wide switch)
+    return jsbsim
+
+
+def _flush_c_stdio() -> None:
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):  # pragma: no cover - a platform without a C library handle
+        pass
+
+
+@contextlib.contextmanager
+def _captured_stdout() -> Iterator[list[str]]:
+    """Send what C++ prints to file descriptor 1 into a buffer; the text is in the yielded list afterwards."""
+    sys.stdout.flush()
+    with tempfile.TemporaryFile() as tmp:
+        saved = os.dup(1)
+        box: list[str] = []
+        try:
+            os.dup2(tmp.fileno(), 1)
+            yield box
+        finally:
+            _flush_c_stdio()  # std::cout goes through C stdio (synced): flush it before fd 1 comes back
+            os.dup2(saved, 1)
+            os.close(saved)
+            tmp.seek(0)
+            box.append(tmp.read().decode("utf-8", "replace"))
+
+
+def _reason(printed: str) -> str:
+    """The last line JSBSim printed that says something, for a one-line error."""
+    lines = [" ".join(line.split()) for line in printed.splitlines()]
+    lines = [line for line in lines if line and not line.startswith(("JSBSim", "[JSBSim"))]
+    return lines[-1] if lines else ""
+
+
+def _locate(name: str, aircraft_dir: str | None, bundled_root: Path) -> tuple[Path, Path | None, bool]:
+    """``(root_dir, aircraft_path or None, add_model_to_path)`` for ``load_model_with_paths``."""
+    if not name or name != Path(name).name or name.startswith("."):
+        raise UserError(f"--aircraft '{name}': expected an aircraft name such as c172p "
+                        "(use --aircraft-dir for a path)")
+    if aircraft_dir is None:
+        if not (bundled_root / "aircraft" / name / f"{name}.xml").is_file():
+            raise UserError(f"--aircraft {name}: JSBSim has no such aircraft (no {name}/{name}.xml in "
+                            f"{bundled_root / 'aircraft'}); e.g. c172p, 737, J3Cub, or --aircraft-dir DIR")
+        return bundled_root, None, True
+    base = Path(aircraft_dir).expanduser().resolve()
+    if not base.is_dir():
+        raise UserError(f"--aircraft-dir {aircraft_dir}: not a directory")
+    if (base / "aircraft" / name / f"{name}.xml").is_file():
+        return base, None, True  # a JSBSim root with its own engine/ and systems/
+    if (base / name / f"{name}.xml").is_file():
+        return bundled_root, base, True
+    if (base / f"{name}.xml").is_file():
+        return bundled_root, base, False
+    raise UserError(f"--aircraft {name}: no {name}.xml in --aircraft-dir {aircraft_dir} (looked for "
+                    f"aircraft/{name}/{name}.xml, {name}/{name}.xml and {name}.xml)")
+
+
+def _load_and_trim(jsbsim, spec: AircraftSpec):
+    """A trimmed FDM instance of ``spec`` (a ``UserError`` naming the reason when it cannot be had)."""
+    bundled = Path(jsbsim.get_default_root_dir())
+    root, aircraft_path, add_name = _locate(spec.name, spec.aircraft_dir, bundled)
+    what = f"--aircraft {spec.name}"
+    with _captured_stdout() as printed:
+        fdm = jsbsim.FGFDMExec(str(root))
+        fdm.set_debug_level(0)
+        try:
+            if aircraft_path is None:
+                loaded = fdm.load_model(spec.name)
+            else:
+                loaded = fdm.load_model_with_paths(spec.name, str(aircraft_path), str(root / "engine"),
+                                                   str(root / "systems"), add_name)
+        except jsbsim.BaseError as exc:
+            loaded, error = False, str(exc)
+        else:
+            error = ""
+    log.debug("JSBSim loading %s: %s", spec.name, printed[0].strip())
+    if not loaded:
+        why = error or _reason(printed[0]) or "JSBSim could not load it"
+        raise UserError(f"{what}: JSBSim cannot load it: {why}")
+    fdm.set_dt(spec.dt)
+    fdm["simulation/randomseed"] = jsbsim_seed(spec.seed)
+    fdm["ic/h-sl-ft"] = spec.altitude_ft
+    fdm["ic/vc-kts"] = spec.airspeed_kt
+    fdm["ic/gamma-deg"] = 0.0
+    where = f"{spec.airspeed_kt:g} kt, {spec.altitude_ft:g} ft"
+    with _captured_stdout() as printed:
+        try:
+            fdm.run_ic()
+            fdm["propulsion/set-running"] = -1  # every engine running
+            fdm["simulation/do_simple_trim"] = 1  # full trim
+        except jsbsim.TrimFailureError as exc:
+            failure = f"{exc}"
+        except (jsbsim.BaseError, RuntimeError, KeyError) as exc:
+            failure = f"{type(exc).__name__}: {exc}"
+        else:
+            failure = ""
+    log.debug("JSBSim trimming %s at %s: %s", spec.name, where, printed[0].strip())
+    if failure:
+        detail = _reason(printed[0])
+        raise UserError(f"{what} does not trim at {where}: {failure}" + (f" ({detail})" if detail else ""))
+    alpha, airspeed = fdm["aero/alpha-deg"], fdm["velocities/vc-kts"]
+    if not (math.isfinite(alpha) and abs(airspeed - spec.airspeed_kt) < 0.01 * spec.airspeed_kt + 0.5):
+        raise UserError(f"{what} does not trim at {where}: JSBSim reports alpha {alpha:g} deg at {airspeed:g} kt")
+    return fdm
+
+
+def _elevator_map(jsbsim, spec: AircraftSpec) -> tuple[np.ndarray, np.ndarray]:
+    """Deflection (deg) per ``fcs/elevator-cmd-norm`` with the pitch trim at 0, from a throw-away instance."""
+    probe = _load_and_trim(jsbsim, spec)
+    try:
+        with _captured_stdout():
+            probe.suspend_integration()
+            probe["fcs/pitch-trim-cmd-norm"] = 0.0
+            deg = []
+            for command in _PROBE:
+                probe["fcs/elevator-cmd-norm"] = float(command)
+                probe.run()
+                deg.append(probe["fcs/elevator-pos-deg"])
+    finally:
+        del probe
+    return _PROBE.copy(), np.array(deg)
+
+
+class JSBSimFlightModel:
+    """A JSBSim aircraft trimmed at ``spec``'s operating point; a ``FlightModel`` in absolute degrees."""
+
+    state_names = ("alpha_deg", "q_deg_s", "theta_deg", "airspeed_m_s")
+    unit = "deg"
+    n_faults = 1
+    n_wind = 0  # JSBSim makes its own weather (--turbulence)
+    rate_limit = None
+
+    def __init__(self, spec: AircraftSpec) -> None:
+        jsbsim = _import_jsbsim()
+        self.spec = spec
+        self.name = spec.name
+        self.h = float(spec.h)
+        self.dt = step_size(self.h, spec.dt)
+        spec = AircraftSpec(**{**spec.__dict__, "dt": self.dt})
+        self.fdm = _load_and_trim(jsbsim, spec)
+        self.version = jsbsim.__version__
+        commands, deflections = _elevator_map(jsbsim, spec)
+        self.trim_deflection = float(self.fdm["fcs/elevator-pos-deg"])
+        total = float(self.fdm["fcs/elevator-cmd-norm"] + self.fdm["fcs/pitch-trim-cmd-norm"])
+        self._deg, self._cmd = self._inverse(commands, deflections, total)
+        self.travel = (float(self._deg[0]), float(self._deg[-1]))
+        # the pitch trim moves into the command: the surface stays where the trim put it
+        self.fdm["fcs/pitch-trim-cmd-norm"] = 0.0
+        self.fdm["fcs/elevator-cmd-norm"] = total
+        self._command = total
+        g = self.fdm.get_property_value
+        self.trim = {"alpha_deg": g("aero/alpha-deg"), "theta_deg": g("attitude/theta-deg"),
+                     "elevator_deg": self.trim_deflection, "throttle": g("fcs/throttle-cmd-norm"),
+                     "airspeed_kt": g("velocities/vc-kts"), "altitude_ft": g("position/h-sl-ft")}
+        self._set_turbulence(spec.turbulence)
+        self.t = 0.0
+        self.n = 0  # JSBSim steps taken
+        self.surface = self.trim_deflection  # the deflection last put on the surface (faults included)
+
+    def _inverse(self, commands: np.ndarray, deflections: np.ndarray,
+                 total: float) -> tuple[np.ndarray, np.ndarray]:
+        """The probed map as (deflection, command), increasing, checked to be a usable static map."""
+        what = f"--aircraft {self.name}"
+        at_trim = float(np.interp(total, commands, deflections))  # commands increase: -1 ... 1
+        if np.all(np.diff(deflections) <= 0):  # a surface that deflects negative for a positive command
+            commands, deflections = commands[::-1], deflections[::-1]
+        if not np.all(np.diff(deflections) >= -1e-9) or deflections[-1] - deflections[0] < 1.0:
+            raise UserError(f"{what}: its elevator is not a static, monotone function of fcs/elevator-cmd-norm "
+                            "(a fly-by-wire pitch channel?); only directly linked elevators are supported")
+        if abs(at_trim - self.trim_deflection) > 0.05:
+            raise UserError(f"{what}: its elevator map gives {at_trim:.3f} deg at the trim command, JSBSim's trim "
+                            f"{self.trim_deflection:.3f} deg (a pitch channel with feedback?); not supported")
+        deg, first = np.unique(deflections, return_index=True)
+        return deg, commands[first]
+
+    def _set_turbulence(self, level: str) -> None:
+        setting = TURBULENCE[level]
+        if setting is None:
+            self.fdm["atmosphere/turb-type"] = 0
+            return
+        windspeed_fps, severity = setting
+        self.fdm["atmosphere/turb-type"] = MILSPEC
+        self.fdm["atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps"] = windspeed_fps
+        self.fdm["atmosphere/turbulence/milspec/severity"] = severity
+
+    # -- FlightModel -------------------------------------------------------------------------------
+    def step(self, T: float, deflection: float, rate: float, f: Sequence[float], d: Sequence[float]) -> None:
+        t_end = self.t + T
+        n_end = int(math.floor(t_end / self.dt + 0.5))
+        bias = float(f[0]) if len(f) else 0.0
+        fdm = self.fdm
+        while self.n < n_end:
+            surface = deflection + bias
+            if rate:
+                surface += rate * max(0.0, self.n * self.dt - self.t)
+            if surface != self.surface:
+                self._put(surface)
+            if not fdm.run():
+                raise FlightModelError(f"JSBSim stopped flying {self.name} at t = {self.n * self.dt:.3f} s")
+            self.n += 1
+        self.t = t_end
+
+    def _put(self, surface: float) -> None:
+        self.surface = surface
+        command = float(np.interp(surface, self._deg, self._cmd))  # clamps to the travel
+        if command != self._command:
+            self._command = command
+            self.fdm["fcs/elevator-cmd-norm"] = command
+
+    def state(self) -> list[float]:
+        g = self.fdm.get_property_value
+        return [g("aero/alpha-deg"), math.degrees(g("velocities/q-rad_sec")), g("attitude/theta-deg"),
+                g("velocities/vc-kts") * KT_TO_M_S]
+
+    def outputs(self) -> Outputs:
+        g = self.fdm.get_property_value
+        alpha = g("aero/alpha-deg")
+        if not math.isfinite(alpha):
+            raise FlightModelError(f"{self.name} left JSBSim's envelope at t = {self.t:.3f} s (alpha is {alpha})")
+        if g("position/h-agl-ft") <= 0.0:
+            raise FlightModelError(f"{self.name} hit the ground at t = {self.t:.3f} s")
+        return Outputs(
+            alpha_deg=alpha,
+            q_deg_s=math.degrees(g("velocities/q-rad_sec")),
+            theta_deg=g("attitude/theta-deg"),
+            airspeed_m_s=g("velocities/vc-kts") * KT_TO_M_S,
+            attitude=(g("attitude/phi-rad"), g("attitude/psi-rad"), g("velocities/p-rad_sec"),
+                      g("velocities/r-rad_sec")),
+            hud=(g("velocities/vg-fps") * FT_TO_M, g("attitude/psi-deg") % 360.0,
+                 int(round(100.0 * g("fcs/throttle-pos-norm"))), g("position/h-sl-meters"),
+                 g("velocities/h-dot-fps") * FT_TO_M),
+        )
+
+    def disturbance(self) -> list[float]:
+        """The turbulence velocity now, north/east/down in m/s."""
+        g = self.fdm.get_property_value
+        return [g("atmosphere/turb-north-fps") * FT_TO_M, g("atmosphere/turb-east-fps") * FT_TO_M,
+                g("atmosphere/turb-down-fps") * FT_TO_M]
+
+    def truth_extras(self) -> dict:
+        g = self.fdm.get_property_value
+        return {"surface": g("fcs/elevator-pos-deg"), "trim": self.trim_deflection,
+                "altitude_m": g("position/h-sl-meters"), "states": list(self.state_names)}
+
+    def close(self) -> None:
+        self.fdm = None  # type: ignore[assignment]
