@@ -85,6 +85,10 @@ def write_gains(path: str | Path, result: DesignResult, plant: Plant) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name, dir=path.parent)
     try:
+        # mkstemp creates 0600; a gains file is no secret: give it the mode any file the user writes gets
+        umask = os.umask(0)
+        os.umask(umask)
+        os.fchmod(fd, 0o666 & ~umask)
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(_to_toml(doc))
         os.replace(tmp, path)

@@ -40,3 +40,18 @@ def test_unknown_keys_are_refused(tmp_path):
     path.write_text('[gains]\nL = [[1.0], [2.0]]\nM = [[1.0]]\nK1 = [[0.0]]\nK2 = [[0.0]]\nK3 = [[0.0]]\nK4 = [[0.0]]\n')
     with pytest.raises(UserError, match="gains.K4"):
         read_gains(path)
+
+
+@pytest.mark.parametrize("umask, mode", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
+def test_a_gains_file_follows_the_umask(tmp_path, umask, mode):
+    import os
+
+    plant = load_plant("paper")
+    result = DesignResult(method="hand", gains=Gains.zero(plant), gamma_e=0.0, gamma_z=0.0,
+                          build_seconds=0.0, solve_seconds=0.0, total_seconds=0.0)
+    old = os.umask(umask)
+    try:
+        write_gains(tmp_path / "g.toml", result, plant)
+    finally:
+        os.umask(old)
+    assert (tmp_path / "g.toml").stat().st_mode & 0o777 == mode

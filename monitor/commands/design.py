@@ -40,6 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--weight-y", type=float, default=0.1, metavar="W",
                         help="weight of gamma_z^2 (output bound) next to gamma_e^2 in the objective (default: 0.1)")
     parser.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    parser.add_argument("--verbose", action="store_true",
+                        help="also print every candidate the search evaluates, on stderr")
     parser.set_defaults(func=run)
 
 
@@ -67,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     plant = load_plant(args.plant)
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     say(f"designing ({args.method}) for plant '{plant.name}' ({plant.source}), tau in [{plant.tau_min}, {plant.tau_max}] s ...")
-    if args.method == "certified" and not args.quiet:
+    if args.method == "certified" and args.verbose and not args.quiet:
         options["progress"] = lambda i, g: say(f"  candidate {i:3d}: " + (f"gamma_e = {g:.4f}" if g else "no certificate"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # cvxpy's "may be inaccurate" warnings: inaccurate solves are refused anyway
