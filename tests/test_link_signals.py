@@ -34,7 +34,7 @@ def test_default_map_is_the_contract() -> None:
     (lambda r: r.update(output=["alpha"]), "unknown key 'output'"),
     (lambda r: r.update(outputs=["alpha", "q"]), "plant has 1 output"),
     (lambda r: r.update(outputs=["beta"]), "'beta', which is not in [signals.measured]"),
-    (lambda r: r["measured"].update(t={"field": "VFR_HUD.airspeed"}), "VFR_HUD has no time_usec or time_boot_ms"),
+    (lambda r: r["measured"].update(elevator={"field": "VFR_HUD.throttle"}), "VFR_HUD has no time_usec or time_boot_ms"),
     (lambda r: r.update(instant="ATTITUDE"), "needs a time_usec field"),
     (lambda r: r["command"].update(channels=[9]), "channels must be in 0..7"),
 ])

@@ -57,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
                   "plant": model.plant.name, "plant_hash": model.plant.digest, "gains": str(args.gains),
                   "gains_method": model.gains.method, "signals": model.signals.describe(),
                   "alarm": f"threshold={alarm.threshold} clear={alarm.clear} samples={alarm.samples}"}
+    if model.signals.operating_point is not None:  # y, x_hat, u, residual in the recording are deviations from it
+        properties["operating_point"] = json.dumps(model.signals.operating_point)
     recorder = None
     if args.rrd:
         from monitor.service.recorder import RrdRecorder

@@ -13,7 +13,8 @@ def add_model_arguments(p: argparse.ArgumentParser, fleet: bool = True) -> None:
                    + (": the default model for every vehicle the fleet file does not list" if fleet else ""))
     p.add_argument("--gains", metavar="GAINS.toml", help="gains file for --plant (from fault-monitor design)")
     p.add_argument("--signals", metavar="FILE", help="signal map for --plant: a TOML file with a [signals] table "
-                   "naming the MAVLink fields of y, the actuator report and the command (default: the plant file's "
+                   "naming the MAVLink fields of y, the actuator report and the command, and optionally the "
+                   "operating_point the plant was identified about (default: the plant file's "
                    "own [signals], else the contract's AOA_SSA / ATTITUDE / ACTUATOR_OUTPUT_STATUS mapping)")
     p.add_argument("--force", action="store_true", help="run gains designed for another plant (hash mismatch)")
     if fleet:
@@ -206,6 +207,10 @@ def run(args: argparse.Namespace) -> int:
                           gains_method=default.gains.method, signals=default.signals.describe(),
                           **{f"gain_{n}": str(getattr(default.gains.gains, n).tolist()) for n in
                              ("L", "M", "K1", "K2", "K3")})
+        if default.signals.operating_point is not None:  # y, x_hat, u, residual in the recording are deviations from it
+            import json
+
+            properties["operating_point"] = json.dumps(default.signals.operating_point)
     if args.fleet:
         properties["fleet"] = str(args.fleet)
     config = MonitorConfig(fleet=fleet, connections=connections, prefix=args.key_prefix,

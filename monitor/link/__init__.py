@@ -5,8 +5,9 @@
     frames      one parser per stream (partial frames kept across reads) or per datagram; CRC and
         |       signature (``signing``) checked; every reject counted
     signals     the signal map: which MESSAGE.field[index] is each plant output, the actuator report,
-        |       the command channel, and which message defines the sampling instant
-    assembly    per vehicle, parts of one sampling instant gathered into one sample, bounded waiting
+        |       the command channel, which message defines the sampling instant, the operating point
+    assembly    per vehicle, parts of one sampling instant gathered into one sample, bounded waiting;
+        |       a message without a time field (VFR_HUD) is a latest value (sample and hold)
         |
     monitor.service.vehicles -> monitor.model.estimator   (the vehicle table and eqs. (5)-(6))
 

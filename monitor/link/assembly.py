@@ -11,6 +11,18 @@ When a sample is processed:
   worth a short wait once the vehicle has been seen to send it: up to ``wait_s`` after the rest is in
   hand, then the sample goes without it (the estimator falls back on the monitor's own last command).
   A vehicle whose reports stop coming is no longer waited for after three such timeouts in a row;
+* a message without a time field (VFR_HUD: "it belongs to the instant the vehicle sends it with") cannot be
+  filed under an instant: its signals are *latest values*. Each one received replaces the vehicle's previous
+  value, stamped with the newest instant heard from the vehicle so far (any timed part; the next one if
+  none yet). A sample takes, when it is processed, the newest value received before that moment, if its
+  stamp is at most the signal's ``hold`` (default 1 s of the vehicle's clock) older than the sample's
+  instant. So it joins the sample still pending when it arrives, and a value that arrives after its sample
+  was processed serves the next sample (sample and hold). A sample never waits for a latest value beyond
+  the wait it has anyway (for the actuator report); it only cannot be processed while an output it needs
+  has no value within its hold (the vehicle's first sample waits for the first value; a stream that stops
+  makes its samples ``held_missing``). Autopilots send VFR_HUD at a rate of their own (ArduPilot: a stream
+  rate, not per sample), routers split every message into its own datagram, and logs reorder them by a
+  few ms: none of that matters to this rule, and ``analyse`` applies it in the log's record order;
 * a sample still incomplete when a newer one is processed is dropped (counted ``incomplete``); parts
   for an instant already processed or dropped are counted: the instant message itself as ``duplicates``
   (same k) or ``stale`` (older k), any other part as ``late_parts``; a part repeated while its sample
@@ -55,6 +67,7 @@ class AssemblyCounters:
     duplicate_parts: int = 0  # a message repeated for an instant still pending
     waited_out: int = 0  # samples processed without the actuator report they waited for
     future: int = 0  # parts too far ahead of the vehicle's last instant to be believed
+    held_missing: int = 0  # samples dropped with every timed part in but a latest value missing or too old
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -82,24 +95,86 @@ class SampleAssembler:
         self.wait_s = wait_s
         self.max_pending = max_pending
         self.counters = AssemblyCounters()
-        self.required = frozenset(signals.messages(observe))
         self.actuator_messages = frozenset(signals.actuator_messages())
         self.expect_actuator = observe
         self._timeouts = 0
         self._parts: dict[str, tuple[int, int, tuple[tuple[str, int, float, float], ...]]] = {}
+        # messages without a time field: message -> ((name, position, scale, offset, hold in us), ...)
+        self._held_parts: dict[str, tuple[tuple[str, int, float, float, float], ...]] = {}
         for name, sig in signals.measured.items():
+            if not sig.timed:
+                entry = (name, sig.position, sig.scale, sig.offset, sig.hold * 1e6)
+                self._held_parts[sig.message] = self._held_parts.get(sig.message, ()) + (entry,)
+                continue
             t_pos, unit_us = signals.time_fields[sig.message]
             prev = self._parts.get(sig.message, (t_pos, unit_us, ()))
             self._parts[sig.message] = (t_pos, unit_us, prev[2] + ((name, sig.position, sig.scale, sig.offset),))
         if signals.instant not in self._parts:
             self._parts[signals.instant] = (*signals.time_fields[signals.instant], ())
+        self.required = frozenset(m for m in signals.messages(observe) if m in self._parts)  # the timed ones
+        self._hold_us = {e[0]: e[4] for entries in self._held_parts.values() for e in entries}
+        self._held_outputs = tuple(n for n in signals.outputs if n in self._hold_us)  # the estimator needs these
+        self._held: dict[str, tuple[float, int | None]] = {}  # name -> (latest value, its stamp in us)
+        self._latest_us: int | None = None  # the newest instant of any timed part accepted
         self._pending: dict[int, _Slot] = {}
         self.last_k: int | None = None
         self._latest_ms: int | None = None
         self.seen: set[str] = set()
 
     def uses(self, message: str) -> bool:
-        return message in self._parts
+        return message in self._parts or message in self._held_parts
+
+    def _fresh(self, name: str, t_us: int) -> float | None:
+        """The latest value of ``name`` if it may serve the sample at ``t_us`` (within its hold), else None."""
+        held = self._held.get(name)
+        if held is None:
+            return None
+        value, stamp = held
+        return value if stamp is None or t_us - stamp <= self._hold_us[name] else None
+
+    def _complete(self, slot: _Slot) -> bool:
+        """Everything the estimator needs: the timed parts, and a latest value within its hold per held output."""
+        if slot.time_usec is None or not self.required <= slot.messages:
+            return False
+        if not self._held_outputs:
+            return True
+        return all(self._fresh(n, slot.time_usec) is not None for n in self._held_outputs)
+
+    def missing_held(self) -> tuple[str, ...]:
+        """Messages of latest-value outputs with no value usable at the newest instant heard (for warnings)."""
+        t_us = self._latest_us
+        if t_us is None:
+            return ()
+        names = [n for n in self._held_outputs if self._fresh(n, t_us) is None]
+        return tuple(dict.fromkeys(self.signals.measured[n].message for n in names))
+
+    def _add_held(self, message: str, values: tuple, now: float) -> list[AssembledSample]:
+        """A message without a time field: its values become the vehicle's latest; a pending sample that only
+        lacked them is released: the newest such (older ones not already waiting for their actuator report are
+        dropped: answering a burst of old instants helps no one, and a datagram buys one answer anyway)."""
+        stamp = self._latest_us
+        for name, pos, scale, offset, _hold in self._held_parts[message]:
+            self._held[name] = (scale * values[pos] + offset, stamp)
+        if not self._held_outputs:
+            return []
+        ready = [k for k, s in self._pending.items() if s.deadline is None and self._complete(s)]
+        if not ready:
+            return []
+        k = max(ready)
+        slot = self._pending[k]
+        for kk in [x for x, s in self._pending.items() if x < k and s.deadline is None]:
+            self._drop(self._pending.pop(kk))
+        if self.expect_actuator and not self.actuator_messages <= slot.messages:
+            slot.deadline = now + self.wait_s
+            return []
+        return self._emit_through(k, now)
+
+    def _drop(self, slot: _Slot) -> None:
+        c = self.counters
+        if slot.time_usec is not None and self.required <= slot.messages:
+            c.held_missing += 1  # every timed part was in: what it lacked was a latest value
+        else:
+            c.incomplete += 1
 
     def _instant_us(self, stamp: int, unit_us: int) -> int:
         if unit_us == 1:
@@ -129,6 +204,9 @@ class SampleAssembler:
         """
         spec = self._parts.get(message)
         if spec is None:
+            if message in self._held_parts:
+                self.seen.add(message)
+                return self._add_held(message, values, now)
             return []
         self.seen.add(message)
         t_pos, unit_us, signals = spec
@@ -157,8 +235,7 @@ class SampleAssembler:
                 if k < oldest:
                     c.incomplete += 1
                     return []
-                del self._pending[oldest]
-                c.incomplete += 1
+                self._drop(self._pending.pop(oldest))
             slot = self._pending[k] = _Slot()
         elif message in slot.messages:
             c.duplicate_parts += 1
@@ -170,7 +247,11 @@ class SampleAssembler:
             slot.time_usec = t_us
             slot.route = route
             self._latest_ms = t_us // 1000
-        if not self.required <= slot.messages:
+        if self._latest_us is None or t_us > self._latest_us:
+            if self._latest_us is None and self._held:  # latest values heard before any timed part: stamp them now
+                self._held = {n: (v, t_us if st is None else st) for n, (v, st) in self._held.items()}
+            self._latest_us = t_us
+        if not self._complete(slot):
             return []
         if self.expect_actuator and not self.actuator_messages <= slot.messages:
             if slot.deadline is None:
@@ -202,12 +283,19 @@ class SampleAssembler:
     def _emit_through(self, k: int, now: float) -> list[AssembledSample]:
         """Process every waiting sample up to ``k`` in order; incomplete older ones are dropped."""
         out: list[AssembledSample] = []
+        held = self._held
         for kk in sorted(x for x in self._pending if x <= k):
             slot = self._pending.pop(kk)
-            if slot.time_usec is None or not self.required <= slot.messages:
-                self.counters.incomplete += 1
+            if not self._complete(slot):
+                self._drop(slot)
                 continue
-            out.append(AssembledSample(kk, slot.time_usec, slot.values, slot.route, now))
+            values = slot.values
+            if held:
+                for name in held:
+                    value = self._fresh(name, slot.time_usec)
+                    if value is not None:
+                        values[name] = value
+            out.append(AssembledSample(kk, slot.time_usec, values, slot.route, now))
         if out:
             self.counters.samples += len(out)
         self.last_k = k if self.last_k is None else max(self.last_k, k)

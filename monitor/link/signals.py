@@ -19,13 +19,22 @@ A ``[signals]`` table in the plant file, or a file of its own (``--signals FILE`
     full_scale = [30.0]                    # plant units per normalised unit (controls are in [-1, 1])
     group = 0
 
+``operating_point = { alpha = 2.31, q = 0.0, ..., elevator = -4.3 }`` (optional; what ``fault-monitor identify``
+writes): the trim the plant was identified about, in plant units, naming every output and actuator signal.
+The estimator then works on deviations ``y - y0`` and ``u - u0`` and commands go out as absolute deflections
+``u0 + u`` (saturated at the actuator limit as absolute values). Absent: zero (the values are the deviations).
+
 ``range = [low, high]`` is the signal's physical envelope: a sample whose estimator inputs are not finite
 or fall outside it is rejected (counted) before the estimator. A value in plant units is
 ``scale * MESSAGE.field[index] + offset`` (e.g. a servo PWM in us:
-``scale = 0.06, offset = -90`` maps 1000..2000 us to -30..30 deg). Each message used must carry ``time_usec``
-or ``time_boot_ms``: that is how parts of one sampling instant are matched (contract: AOA_SSA's
-``time_usec`` is the instant, ATTITUDE matches by ``time_boot_ms``, ACTUATOR_OUTPUT_STATUS by
-``time_usec``). Anything unknown (a message, a field, an index, a key) is a one-line error naming it.
+``scale = 0.06, offset = -90`` maps 1000..2000 us to -30..30 deg). A message with ``time_usec`` or
+``time_boot_ms`` is matched to its sampling instant by that field (contract: AOA_SSA's ``time_usec`` is the
+instant, ATTITUDE matches by ``time_boot_ms``, ACTUATOR_OUTPUT_STATUS by ``time_usec``). A message without
+one (VFR_HUD) cannot be matched: its signals are *latest values* (sample and hold): a sample takes the
+newest value received from its vehicle before the sample is processed, if that value is at most ``hold``
+seconds of the vehicle's clock older than the sample (default 1 s; see monitor/link/assembly.py). The
+instant and the actuator report need a time field. Anything unknown (a message, a field, an index, a key)
+is a one-line error naming it.
 
 Why names and not just a list of fields: the recording and the replay report read signals by name
 (``alpha`` gives ``peak_alpha``), and a second airframe names its own.
@@ -63,8 +72,9 @@ full_scale = [30.0]
 group = 0
 """
 
-_TOP_KEYS = {"instant", "outputs", "actuator", "record", "measured", "command"}
-_SIGNAL_KEYS = {"field", "scale", "offset", "unit", "range"}
+_TOP_KEYS = {"instant", "outputs", "actuator", "record", "measured", "command", "operating_point"}
+_SIGNAL_KEYS = {"field", "scale", "offset", "unit", "range", "hold"}
+DEFAULT_HOLD_S = 1.0  # a latest-value signal (no time field) older than this, in the vehicle's seconds, is not used
 _COMMAND_KEYS = {"message", "channels", "full_scale", "group"}
 _COMMAND_MESSAGES = {"SET_ACTUATOR_CONTROL_TARGET": ("controls", 8)}
 
@@ -82,6 +92,11 @@ class Signal:
     unit: str
     offset: float = 0.0
     range: tuple[float, float] | None = None  # the physical envelope, plant units (None: any finite value)
+    hold: float | None = None  # None: matched by its message's time field; else a latest value, usable this long (s)
+
+    @property
+    def timed(self) -> bool:
+        return self.hold is None
 
 
 @dataclass(frozen=True)
@@ -102,12 +117,42 @@ class SignalMap:
     actuator: tuple[str, ...]
     record: tuple[str, ...]
     command: CommandMap
-    time_fields: dict[str, tuple[int, int]]  # message -> (flat position of its time field, us per unit)
+    time_fields: dict[str, tuple[int, int]]  # timed message -> (flat position of its time field, us per unit)
     source: str
+    operating_point: dict[str, float] | None = None  # plant units, every output and actuator signal (None: zero)
+    y0: tuple[float, ...] = ()  # the operating point of the outputs, in the order of ``outputs`` (zeros if none)
+    u0: tuple[float, ...] = ()  # ... and of the actuator signals
+
+    def __post_init__(self) -> None:
+        op = self.operating_point or {}
+        if len(self.y0) != len(self.outputs):
+            object.__setattr__(self, "y0", tuple(float(op.get(n, 0.0)) for n in self.outputs))
+        if len(self.u0) != len(self.actuator):
+            object.__setattr__(self, "u0", tuple(float(op.get(n, 0.0)) for n in self.actuator))
+
+    def deviations(self, values: dict[str, float]) -> tuple[list[float], list[float] | None]:
+        """``y - y0`` and ``u - u0`` (None when the sample has no complete actuator report) for the estimator."""
+        y = [values[name] - y0 for name, y0 in zip(self.outputs, self.y0)]
+        report = [values[name] - u0 for name, u0 in zip(self.actuator, self.u0) if name in values]
+        return y, (report if len(report) == len(self.actuator) else None)
+
+    def absolute(self, u) -> list[float]:
+        """A command in deviation coordinates as the absolute deflection that goes on the wire, ``u0 + u``."""
+        return [u0 + float(v) for u0, v in zip(self.u0, u)]
+
+    def describe_operating_point(self) -> str | None:
+        """``operating point alpha 2.31 deg, ..., elevator -4.3 deg`` (None when the map has none)."""
+        if self.operating_point is None:
+            return None
+        parts = []
+        for name in (*self.outputs, *self.actuator):
+            unit = self.measured[name].unit
+            parts.append(f"{name} {self.operating_point[name]:.6g}" + (f" {unit}" if unit else ""))
+        return "operating point " + ", ".join(parts)
 
     def messages(self, observe: bool) -> tuple[str, ...]:
         """Every message whose parts make one sample (the instant first): what the estimator cannot do without."""
-        names = [self.instant] + [self.measured[s].message for s in self.outputs]
+        names = [self.instant] + [self.measured[s].message for s in self.outputs]  # incl. latest-value messages
         if observe:
             names += [self.measured[s].message for s in self.actuator]
         return tuple(dict.fromkeys(names))
@@ -132,7 +177,8 @@ class SignalMap:
         return tuple(dict.fromkeys(self.measured[s].message for s in self.actuator))
 
     def describe(self) -> str:
-        outs = ", ".join(f"y{i}={self.measured[s].message}.{self.measured[s].field}" for i, s in enumerate(self.outputs))
+        outs = ", ".join(f"y{i}={self.measured[s].message}.{self.measured[s].field}"
+                         + ("" if self.measured[s].timed else " (latest value)") for i, s in enumerate(self.outputs))
         return f"instant {self.instant}; {outs}"
 
 
@@ -197,7 +243,7 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int) -> SignalMap
             spec = {"field": spec}
         bad = sorted(set(spec) - _SIGNAL_KEYS)
         if bad:
-            raise UserError(f"{w}: unknown key '{bad[0]}' (known: field, scale, offset, unit, range)")
+            raise UserError(f"{w}: unknown key '{bad[0]}' (known: field, scale, offset, unit, range, hold)")
         layout, field, index = _field_ref(spec.get("field"), w)
         scale = spec.get("scale", 1.0)
         if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale == 0:
@@ -206,9 +252,17 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int) -> SignalMap
         if isinstance(offset, bool) or not isinstance(offset, (int, float)) or not math.isfinite(offset):
             raise UserError(f"{w}: 'offset' must be a finite number")
         stamp = layout.time_field()
-        if stamp is None:
-            raise UserError(f"{w}: {layout.name} has no time_usec or time_boot_ms to match it to a sampling instant")
-        time_fields[layout.name] = (layout.position(stamp[0]), stamp[1])
+        hold = spec.get("hold")
+        if stamp is not None:
+            if hold is not None:
+                raise UserError(f"{w}: 'hold' is for a message without a time field; {layout.name} is matched by "
+                                f"its {stamp[0]}")
+            time_fields[layout.name] = (layout.position(stamp[0]), stamp[1])
+        else:  # no time field (VFR_HUD): a latest value, sample and hold
+            hold = DEFAULT_HOLD_S if hold is None else hold
+            if isinstance(hold, bool) or not isinstance(hold, (int, float)) or not (math.isfinite(hold) and hold > 0):
+                raise UserError(f"{w}: 'hold' must be a positive number of seconds")
+            hold = float(hold)
         bounds = spec.get("range")
         if bounds is not None:
             if (not isinstance(bounds, list) or len(bounds) != 2 or
@@ -217,7 +271,7 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int) -> SignalMap
                 raise UserError(f"{w}: 'range' must be [low, high] with finite low < high")
             bounds = (float(bounds[0]), float(bounds[1]))
         measured[name] = Signal(name, layout.name, field, index, layout.position(field, index), float(scale),
-                                str(spec.get("unit", "")), float(offset), bounds)
+                                str(spec.get("unit", "")), float(offset), bounds, hold)
     instant = raw.get("instant")
     instant_layout = layout_by_name(instant) if isinstance(instant, str) else None
     if instant_layout is None:
@@ -232,6 +286,11 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int) -> SignalMap
     act = _names(raw, "actuator", where, measured)
     if len(act) != inputs:
         raise UserError(f"{where}: 'actuator' names {len(act)} signal(s) but the plant has {inputs} input(s)")
+    for name in act:
+        if not measured[name].timed:
+            raise UserError(f"{where}: actuator '{name}': {measured[name].message} has no time_usec or time_boot_ms, "
+                            "and the actuator report must be matched to its instant")
+    op = _operating_point(raw.get("operating_point"), where, measured, outs, act)
     record = _names(raw, "record", where, measured, default=list(measured))
     cmd = raw.get("command", {})
     if not isinstance(cmd, dict):
@@ -253,7 +312,38 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int) -> SignalMap
     if isinstance(group, bool) or not isinstance(group, int) or not 0 <= group <= 255:
         raise UserError(f"{where} command: group must be an integer 0-255")
     return SignalMap(instant_layout.name, measured, outs, act, record, CommandMap(message, channels, full_scale, group),
-                     time_fields, source)
+                     time_fields, source, op)
+
+
+def _operating_point(raw: Any, where: str, measured: dict[str, Signal], outs: tuple[str, ...],
+                     act: tuple[str, ...]) -> dict[str, float] | None:
+    """``operating_point = { name = value, ... }``: every output and actuator signal, each a finite number."""
+    if raw is None:
+        return None
+    w = f"{where} operating_point"
+    if not isinstance(raw, dict):
+        raise UserError(f"{w}: must be a table {{ name = value, ... }} naming every output and actuator signal")
+    wanted = (*outs, *act)
+    for name in raw:
+        if name not in measured:
+            raise UserError(f"{w}: names '{name}', which is not in [signals.measured]")
+        if name not in wanted:
+            raise UserError(f"{w}: names '{name}', which is not an output or actuator signal "
+                            f"(give: {', '.join(wanted)})")
+    missing = [name for name in wanted if name not in raw]
+    if missing:
+        raise UserError(f"{w}: missing {', '.join(repr(n) for n in missing)} (it must name every output and "
+                        f"actuator signal: {', '.join(wanted)})")
+    op: dict[str, float] = {}
+    for name in wanted:
+        value = raw[name]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise UserError(f"{w}: '{name}' must be a finite number (plant units), got {value!r}")
+        bounds = measured[name].range
+        if bounds is not None and not bounds[0] <= value <= bounds[1]:
+            raise UserError(f"{w}: '{name}' = {value:g} is outside its range [{bounds[0]:g}, {bounds[1]:g}]")
+        op[name] = float(value)
+    return op
 
 
 def default_signal_map(outputs: int = 1, inputs: int = 1) -> SignalMap:

@@ -9,6 +9,9 @@ measurement ``y(k)`` and u(k-1) the deflection in force at the instant:
     x_hat(k+1) = A x_hat + B0 u(k) + B1 u(k-1) + Df f_hat + L r   (observer, eq. 5)
     f_hat(k+1) = f_hat + M r
 
+With an operating point (a plant identified about a trim, monitor/link/signals.py) every quantity here is a
+deviation from it (y - y0, u - u0); only the saturation knows u0: the limit holds for u0 + u.
+
 ``f_hat(k)`` (the estimate that went into ``u(k)``) is what is reported for sample k, so that
 ``e_f(k) = f(k) - f_hat(k)`` lines up with the truth at the same k.
 
@@ -76,12 +79,17 @@ class Estimator:
     overhead is most of the cost; plain floats take a third of the time (benchmarks/bench_monitor.py).
     """
 
-    def __init__(self, plant: Plant, gains: Gains, max_gap: int = 50, u_limit: float | None = None) -> None:
+    def __init__(self, plant: Plant, gains: Gains, max_gap: int = 50, u_limit: float | None = None,
+                 u0=None) -> None:
+        """``u0``: the operating point of the inputs when the plant works in deviations (``u`` here is
+        ``u_abs - u0``): the actuator limit holds for the absolute deflection, so ``u`` is saturated to
+        ``[-limit - u0, limit - u0]``. None: zero."""
         gains.check_shapes(plant)
         self.plant = plant
         self.gains = gains
         self.max_gap = max_gap
         self.u_limit = u_limit if u_limit is not None else plant.actuator.limit
+        self.u0 = [float(v) for v in np.ravel(u0)] if u0 is not None else [0.0] * plant.m
         A, B0, B1, C, Df = plant.A, plant.B0, plant.B1, plant.C, plant.Df
         n, q, m, l = plant.n, plant.q, plant.m, plant.l
         self._U = np.hstack([np.zeros((m, n)), gains.K3, gains.K2, gains.K1])
@@ -101,14 +109,19 @@ class Estimator:
         self._skipped = 0
         self._O_rows = self._O.tolist()
         self._lim = float(self.u_limit) if self.u_limit is not None else None
+        # per input: the saturation bounds in deviation coordinates
+        self._bounds = ([(-self._lim - c, self._lim - c) for c in self.u0] if self._lim is not None else None)
 
     def initial_state(self) -> EstimatorState:
         p = self.plant
         return EstimatorState(z=np.zeros(p.n + p.q + p.m), n=p.n, q=p.q)
 
     def saturate(self, u: np.ndarray) -> np.ndarray:
-        lim = self.u_limit
-        return np.clip(u, -lim, lim) if lim is not None else u
+        """``u`` (deviation) limited so that ``u0 + u`` stays within the actuator limit."""
+        if self._bounds is None:
+            return u
+        lo, hi = np.array(self._bounds, dtype=float).T
+        return np.clip(np.asarray(u, dtype=float), lo, hi)
 
     def _advance(self, s: EstimatorState, k: int, u_prev, applied: bool | None = None) -> list[float]:
         """Predict over lost samples up to k, put the reported u(k-1) in; returns z as a list of floats.
@@ -173,9 +186,9 @@ class Estimator:
         """
         v = self._advance(s, k, u_prev, applied) + [float(e) for e in np.ravel(y)]
         u = [sum(map(mul, row, v)) for row in self._U_rows]
-        lim = self._lim
-        if lim is not None:
-            u = [lim if e > lim else -lim if e < -lim else e for e in u]
+        bounds = self._bounds
+        if bounds is not None:
+            u = [hi if e > hi else lo if e < lo else e for e, (lo, hi) in zip(u, bounds)]
         return self._finish(s, k, v, u)
 
     def observe(self, s: EstimatorState, k: int, y, u_now, u_prev=None) -> StepResult:

@@ -94,6 +94,16 @@ def _recording_outputs(config: MonitorConfig) -> str:
     return out + "".join(f", live viewer {url}" for url in config.live_urls)
 
 
+def _operating_points(config: MonitorConfig) -> str:
+    """The ready line's last part: the operating point of each model that has one (plants from ``identify``)."""
+    models = [m for m in config.fleet.models() if m.signals.operating_point is not None]
+    if not models:
+        return ""
+    if len(config.fleet.models()) == 1:
+        return f"; {models[0].signals.describe_operating_point()}"
+    return "".join(f"; plant {m.plant.name}: {m.signals.describe_operating_point()}" for m in models)
+
+
 def _live_urls(config: MonitorConfig) -> list[str]:
     """``--rerun-url`` addresses plus the spawned viewer's (started here, before the loop), each once."""
     urls = list(dict.fromkeys(config.live_urls))
@@ -118,9 +128,9 @@ async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
             await link.start()
             links.append(link)
         mode = "observe-only" if config.observe else "closed loop"
-        log.info("ready: %s; MAVLink %s; Zenoh %s, key prefix '%s', name '%s'%s", mode,
+        log.info("ready: %s; MAVLink %s; Zenoh %s, key prefix '%s', name '%s'%s%s", mode,
                  ", ".join(link.local for link in links), config.zenoh_endpoints or "(config file)", config.prefix,
-                 config.name, _recording_outputs(config))
+                 config.name, _recording_outputs(config), _operating_points(config))
         for link in links:
             link.heartbeat()
         next_housekeeping = time.monotonic() + 1.0

@@ -10,6 +10,11 @@ for I/O other than a non-blocking send. Processing time is measured from the mom
 to the end of the hand-offs.
 
 ``analyse`` passes ``route=None`` (nothing to answer) and the log's own times as ``now``/``wall``.
+
+Operating point (a plant identified about a trim): the estimator's quantities are deviations from it; what
+leaves on MAVLink and in the Zenoh estimate's ``u`` is the absolute deflection ``u0 + u``; the recording
+keeps the measured values as measured (absolute) and the estimator's y, x_hat, f_hat, u, residual as
+deviations (its properties carry the operating point).
 """
 
 from __future__ import annotations
@@ -126,7 +131,9 @@ class Pipeline:
             link, peer = route
             out = b""
             if self.send_commands:
-                out = command_frame(link.encoder, vehicle.model.signals.command, vehicle.sysid, sample.time_usec, r.u)
+                # the absolute deflection u0 + u(k) (the estimator's u is a deviation from the operating point)
+                out = command_frame(link.encoder, vehicle.model.signals.command, vehicle.sysid, sample.time_usec,
+                                    p.u_abs)
                 self.commands_sent += 1
             if self.gcs_feedback:
                 out += fhat_frames(link.encoder, sample.time_usec, r.f_hat)
@@ -138,7 +145,7 @@ class Pipeline:
                 link.send(out, peer)
         raised = vehicle.alarm.raised
         if self.publisher is not None:
-            self.publisher.estimate((vehicle.sysid, r.k, p.t, r.f_hat, r.x_hat, r.residual, r.u, p.tau_obs, raised,
+            self.publisher.estimate((vehicle.sysid, r.k, p.t, r.f_hat, r.x_hat, r.residual, p.u_abs, p.tau_obs, raised,
                                      p.command_applied, vehicle.commands_effective))
             if p.alarm_event is not None:
                 self.publisher.alarm(vehicle.sysid, r.k, p.t, p.alarm_event, r.f_hat)
@@ -173,10 +180,10 @@ class Pipeline:
         p50, p99 = percentile(self.processing_s, 50), percentile(self.processing_s, 99)
         timing = (f"processing p50 {p50 * 1e6:.0f} us, p99 {p99 * 1e6:.0f} us" if p50 is not None
                   else "no processing times")
-        order = ("processed", "duplicates", "stale", "incomplete", "late_parts", "waited_out", "no_report",
-                 "not_applied", "rejected_values", "future", "foreign_source", "excess", "garbage", "truncated",
-                 "bad_signature", "wrong_dialect", "foreign", "refused", "skipped", "vehicles_seen", "restarts",
-                 "resets", "commands", "feedback", "published", "publish_drops")
+        order = ("processed", "duplicates", "stale", "incomplete", "held_missing", "late_parts", "waited_out",
+                 "no_report", "not_applied", "rejected_values", "future", "foreign_source", "excess", "garbage",
+                 "truncated", "bad_signature", "wrong_dialect", "foreign", "refused", "skipped", "vehicles_seen",
+                 "restarts", "resets", "commands", "feedback", "published", "publish_drops")
         names = {"processed": "samples processed", "vehicles_seen": "vehicles"}
         parts = [f"{names.get(key, key.replace('_', ' '))} {c[key]}" for key in order if key in c]
         return ", ".join(parts) + f"; {timing}"

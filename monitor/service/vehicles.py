@@ -83,7 +83,13 @@ def load_model(plant_spec: str | Path, gains_path: str | Path, force: bool = Fal
             raise UserError(f"{what}; use --force to run it anyway")
         log.warning("%s; running anyway (--force)", what)
     signals = signals_for_plant(plant, signals_file)
-    return VehicleModel(plant, gains, Estimator(plant, gains.gains), signals)
+    limit = plant.actuator.limit
+    if limit is not None:
+        for name, u0 in zip(signals.actuator, signals.u0):
+            if not abs(u0) < limit:
+                raise UserError(f"{signals.source}: [signals] operating_point: '{name}' = {u0:g} is not inside the "
+                                f"actuator limit +-{limit:g} of plant {plant.name}")
+    return VehicleModel(plant, gains, Estimator(plant, gains.gains, u0=signals.u0), signals)
 
 
 class Fleet:
@@ -153,7 +159,7 @@ class Vehicle:
     __slots__ = ("sysid", "model", "state", "alarm", "delay", "assembler", "route", "last_seen", "first_seen",
                  "processed", "skipped", "warned_missing", "last_command", "last_command_k", "no_report", "rejected",
                  "last_reject_log", "applied", "commands_effective", "not_applied", "last_sample_at", "run",
-                 "future_since", "taken_over")
+                 "future_since", "taken_over", "held_missing_seen", "held_missing_log")
 
     def __init__(self, sysid: int, model: VehicleModel, alarm: AlarmConfig, route: object, now: float,
                  observe: bool, wait_s: float, run: int = 0) -> None:
@@ -176,6 +182,8 @@ class Vehicle:
         self.last_sample_at: float | None = None
         self.future_since: float | None = None
         self.taken_over = False  # a new route took over after silence and has not given a sample yet
+        self.held_missing_seen = 0  # the assembler's held_missing count when last warned about (or resolved)
+        self.held_missing_log = -1e9
 
 
 @dataclass
@@ -199,11 +207,12 @@ class TableCounters:
 class Processed:
     """The outcome of one processed sample, for the reply, the publishers and the recorder."""
 
-    __slots__ = ("vehicle", "sample", "result", "t", "y", "tau_obs", "alarm_event", "f_mag", "command_applied")
+    __slots__ = ("vehicle", "sample", "result", "t", "y", "tau_obs", "alarm_event", "f_mag", "command_applied",
+                 "u_abs")
 
     def __init__(self, vehicle: Vehicle, sample: AssembledSample, result: StepResult, t: float, y: list[float],
                  tau_obs: float | None, alarm_event: str | None, f_mag: float,
-                 command_applied: bool | None = None) -> None:
+                 command_applied: bool | None = None, u_abs: list[float] | None = None) -> None:
         self.vehicle = vehicle
         self.sample = sample
         self.result = result
@@ -213,6 +222,8 @@ class Processed:
         self.alarm_event = alarm_event
         self.f_mag = f_mag
         self.command_applied = command_applied  # did the previous command act (None: cannot tell)?
+        # the absolute deflection u0 + u(k): what goes on the wire (observe-only: what the vehicle reported)
+        self.u_abs = u_abs if u_abs is not None else result.u.tolist()
 
 
 class VehicleTable:
@@ -247,8 +258,9 @@ class VehicleTable:
         self._runs[sysid] = run
         vehicle = self.vehicles[sysid] = Vehicle(sysid, model, self.alarm, route, now, self.observe, self.wait_s, run)
         self.counters.vehicles_seen += 1
-        log.info("vehicle sysid %d from %s: new estimator (plant %s; %s)", sysid, _where(route), model.plant.name,
-                 model.signals.describe())
+        op = model.signals.describe_operating_point()
+        log.info("vehicle sysid %d from %s: new estimator (plant %s; %s%s)", sysid, _where(route), model.plant.name,
+                 model.signals.describe(), f"; {op}" if op else "")
         return vehicle
 
     def message(self, sysid: int, name: str, values: tuple, route: object, now: float) -> list[tuple[Vehicle, AssembledSample]]:
@@ -349,14 +361,14 @@ class VehicleTable:
             return None
         for name in [n for n, v in values.items() if not math.isfinite(v)]:
             del values[name]  # a non-finite recorded-only signal is not recorded
-        y = [values[name] for name in sig.outputs]
-        report = [values[name] for name in sig.actuator if name in values]
-        u_report = report if len(report) == len(sig.actuator) else None
+        # the estimator works in deviations from the signal map's operating point (zero when it has none)
+        y, u_report = sig.deviations(values)
         est = model.estimator
         applied = None
         if self.observe:
             # u(k) issued by the vehicle is in this sample's report; u(k-1) stays from the previous one
             result = est.observe(vehicle.state, sample.k, y, u_report)
+            u_abs = [values[name] for name in sig.actuator]
         else:
             if u_report is None:
                 vehicle.no_report += 1
@@ -366,6 +378,10 @@ class VehicleTable:
             result = est.step(vehicle.state, sample.k, y, u_prev=u_report, applied=applied)
             vehicle.last_command = result.u.tolist()
             vehicle.last_command_k = sample.k
+            u_abs = sig.absolute(vehicle.last_command)
+            lim = est.u_limit
+            if lim is not None:  # u was saturated for u0 + u; this only takes off the last bit of rounding
+                u_abs = [lim if v > lim else -lim if v < -lim else v for v in u_abs]
         if result.reset:
             self.counters.resets += 1
             log.error("vehicle sysid %d: estimator state became non-finite at k=%d; reset to zero", vehicle.sysid,
@@ -380,7 +396,7 @@ class VehicleTable:
         f_mag = max(abs(float(f)) for f in result.f_hat)
         event = vehicle.alarm.update(f_mag)
         tau_obs = vehicle.delay.update(t, wall)
-        return Processed(vehicle, sample, result, t, y, tau_obs, event, f_mag, applied)
+        return Processed(vehicle, sample, result, t, y, tau_obs, event, f_mag, applied, u_abs)
 
     def _judge_applied(self, vehicle: Vehicle, k: int, reported: list[float]) -> bool | None:
         """Did the last command (for k-1, or earlier when samples were lost since) act? The report at k says so."""
@@ -414,6 +430,23 @@ class VehicleTable:
                 totals[key] += value
         return totals
 
+    @staticmethod
+    def _warn_held(v: Vehicle, now: float) -> None:
+        """A vehicle that was giving samples and now loses them for want of a latest value: WARNING while it lasts
+        (10 s apart). Drops that are over by the check (a first VFR_HUD after the first samples) are only counted."""
+        count = v.assembler.counters.held_missing
+        if count == v.held_missing_seen or not v.processed:
+            return
+        stale = v.assembler.missing_held()
+        if not stale:
+            v.held_missing_seen = count
+            return
+        if now - v.held_missing_log >= 10.0:
+            v.held_missing_log = now
+            log.warning("vehicle sysid %d: %d sample(s) dropped: %s (no time field) not heard within its hold; "
+                        "%d so far", v.sysid, count - v.held_missing_seen, ", ".join(stale), count)
+            v.held_missing_seen = count
+
     def expire(self, now: float) -> list[int]:
         """Drop vehicles silent for ``timeout`` seconds; returns their system ids."""
         gone = [s for s, v in self.vehicles.items() if now - v.last_seen > self.timeout]
@@ -427,13 +460,16 @@ class VehicleTable:
         """One WARNING per vehicle heard for a while whose messages never made a sample: what is missing."""
         warned = []
         for v in self.vehicles.values():
+            self._warn_held(v, now)
             if v.processed or v.warned_missing or now - v.first_seen < MISSING_WARNING_S:
                 continue
             asm = v.assembler
             missing = [m for m in asm.signals.messages(self.observe) if m not in asm.seen]
             if not missing and asm.expect_actuator:
                 missing = [m for m in asm.signals.actuator_messages() if m not in asm.seen]
+            stale = asm.missing_held() if not missing else ()
             what = (f"missing {', '.join(missing)}" if missing else
+                    f"{', '.join(stale)} (no time field: a latest value) is older than its hold" if stale else
                     "its messages never share a sampling instant (check the time fields)")
             log.warning("vehicle sysid %d: telemetry arrives (%s) but never becomes a sample: %s (signal map: %s)",
                         v.sysid, ", ".join(sorted(asm.seen)) or "nothing the signal map uses", what,
