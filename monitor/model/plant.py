@@ -32,10 +32,14 @@ __all__ = ["Plant", "ContinuousModel", "Actuator", "load_plant", "parse_plant", 
 
 PRESETS = {"paper": "paper.toml", "paper-continuous": "paper-continuous.toml"}
 
-_COMMON_KEYS = {"form", "name", "description", "unit", "h", "tau_min", "tau_max", "C", "actuator", "signals"}
+_COMMON_KEYS = {"form", "name", "description", "unit", "h", "tau_min", "tau_max", "C", "actuator", "signals",
+                "identification"}
 _CONTINUOUS_KEYS = _COMMON_KEYS | {"A_c", "B_c", "D_cf", "D_cd"}
 _DISCRETE_KEYS = _COMMON_KEYS | {"A", "B0", "B1", "Df", "Dd", "delta", "E"}
 _ACTUATOR_KEYS = {"limit", "rate_limit"}
+# tables that say nothing about the dynamics: left out of the digest, so gains stay valid when they are edited.
+# [identification] is what `fault-monitor identify` found (source log, fit, modes): information, never maths.
+_NOT_DYNAMICS = ("signals", "identification")
 
 
 @dataclass(frozen=True)
@@ -157,6 +161,9 @@ def plant_from_table(raw: dict[str, Any], source: str) -> Plant:
             f"{source}: unknown key '{unknown[0]}' for form '{form}' (allowed: {', '.join(sorted(allowed))})"
         )
     reader = _Reader(raw, source)
+    if "identification" in raw and not isinstance(raw["identification"], dict):
+        raise UserError(f"{source}: key 'identification' must be a table ([identification]: how the plant was "
+                        f"identified, information only), got {raw['identification']!r}")
     h = reader.scalar("h", positive=True)
     tau_min = reader.scalar("tau_min")
     tau_max = reader.scalar("tau_max")
@@ -178,7 +185,7 @@ def plant_from_table(raw: dict[str, Any], source: str) -> Plant:
         description=str(raw.get("description", "")),
         actuator=reader.actuator(),
         source=source,
-        digest=_digest({k: v for k, v in raw.items() if k != "signals"}),
+        digest=_digest({k: v for k, v in raw.items() if k not in _NOT_DYNAMICS}),
         signals=raw.get("signals"),
         raw=raw,
     )
@@ -263,7 +270,8 @@ class _Reader:
 def _digest(raw: dict[str, Any]) -> str:
     """A hash of the plant's content (not its formatting), so gains can say which plant they are for.
 
-    The ``[signals]`` table is left out: which MAVLink fields carry y and u does not change the dynamics.
+    The ``[signals]`` and ``[identification]`` tables are left out: which MAVLink fields carry y and u, or how
+    the matrices were found, does not change the dynamics.
     """
     canonical = json.dumps(raw, sort_keys=True, separators=(",", ":"))
     return "sha256:" + hashlib.sha256(canonical.encode()).hexdigest()[:16]

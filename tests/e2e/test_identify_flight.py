@@ -1,0 +1,51 @@
+"""From a flight log to certified gains with the installed commands: ``fault-monitor identify`` on a c172p flight
+(JSBSim, logged as MAVProxy logs), then ``fault-monitor design`` and ``verify`` on the plant file it wrote, as is.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tomllib
+
+import pytest
+
+from monitor.model.plant import load_plant
+from tests.test_identify import fly, write_tlog
+
+
+def _cli(*argv: str, timeout: float = 150.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "monitor", *argv], capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.timeout(240)
+def test_identify_then_design_and_verify_the_plant_it_wrote(tmp_path) -> None:
+    log, plant_file, gains = tmp_path / "c172p.tlog", tmp_path / "c172p.toml", tmp_path / "gains.toml"
+    write_tlog(log, fly())
+
+    proc = _cli("identify", str(log), "--out", str(plant_file))
+    assert proc.returncode == 0, proc.stderr
+    assert "fit on held-out data" in proc.stdout and "short period" in proc.stdout and "phugoid" in proc.stdout
+    assert "Traceback" not in proc.stderr
+    plant = load_plant(plant_file)
+    assert plant.n == 4 and tomllib.loads(plant_file.read_text())["identification"]["model"] == "longitudinal"
+
+    proc = _cli("design", "--plant", str(plant_file), "--out", str(gains), "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    assert tomllib.loads(gains.read_text())["gains"]["plant_hash"] == plant.digest
+
+    proc = _cli("verify", "--plant", str(plant_file), "--gains", str(gains), "--json")
+    assert proc.returncode == 0, proc.stderr + proc.stdout
+    assert json.loads(proc.stdout)["stable"] is True
+
+
+def test_identify_refusals_are_one_line_and_exit_2(tmp_path) -> None:
+    log = tmp_path / "trim.tlog"
+    write_tlog(log, fly(seconds=0.0, lead_in=15.0))
+    proc = _cli("identify", str(log), "--out", str(tmp_path / "p.toml"))
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr.count("\n") == 1 and "no excitation" in proc.stderr, proc.stderr
+    proc = _cli("identify", str(tmp_path / "nothing.tlog"), "--out", str(tmp_path / "p.toml"))
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "no such log file" in proc.stderr
+    assert not (tmp_path / "p.toml").exists()
