@@ -1,0 +1,107 @@
+"""The whole chain on a JSBSim aircraft with the README's commands only, judged against the truth stream.
+
+sim-vehicle flies c172p through MAVProxy (a real router writing the tlog a user would record) with an elevator
+PRBS; `fault-monitor identify` turns that tlog into a plant; `design` and `verify` certify gains for it; the
+monitor then closes the loop on the nonlinear aircraft through MAVProxy with a 2 deg elevator bias, and
+`analyse` reads that flight's tlog observe-only. f_hat must be within 5 % of the bias from 1 s after onset on.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from tests.daemons import Daemon, free_tcp_port, free_udp_port, wait_for
+from tests.e2e.test_mavproxy import MavProxy, _tlog_counts
+from tests.e2e.test_monitor_paper import processed_count, wait_ready
+
+RATE = 20  # Hz: h = 0.05 s
+EXCITE_STEPS = 1500  # 75 s: a 60-s PRBS and the settling after it
+ONSET = 100  # the bias starts 5 s into the closed-loop flight
+FLIGHT_STEPS = 700  # 35 s, 30 s after onset (at 2x real time: MAVProxy routes in Python, ms per message)
+BIAS = 2.0
+
+
+def _cli(module: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    out = subprocess.run([sys.executable, "-m", module, *args], capture_output=True, text=True, timeout=timeout)
+    assert out.returncode == 0, f"{module} {args[0]} failed ({out.returncode}):\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}"
+    return out
+
+
+def _through_mavproxy(tmp_path: Path, name: str, steps: int, vehicle_args: list[str], monitor: Daemon | None,
+                      monitor_port: int) -> Path:
+    """Fly ``steps`` samples of c172p through a MAVProxy that writes ``<name>.tlog``; returns the tlog."""
+    d = tmp_path / name
+    d.mkdir()
+    master = free_udp_port()
+    with MavProxy(d, master, monitor_port) as mp:
+        vehicle = Daemon("sim_vehicle", ["run", "--aircraft", "c172p", "--airspeed", "100", "--altitude", "3000",
+                                         "--rate", str(RATE), "--steps", str(steps), "--mavlink",
+                                         f"udpout:127.0.0.1:{master}", "--no-zenoh", *vehicle_args],
+                         d / "vehicle.log")
+        with vehicle:
+            assert vehicle.wait(120) == 0, vehicle.log()[-3000:]
+        wait_for(lambda: mp.tlog.exists() and _tlog_counts(mp.tlog)[("AOA_SSA", 1)] >= steps - 1, 15,
+                 what="MAVProxy's tlog to hold the flight")
+        return mp.tlog
+
+
+def _f_hat_by_k(rows) -> dict[int, float]:
+    return {r.k: float(np.ravel(r.f_hat)[0]) for r in rows}
+
+
+def _assert_tracks_the_bias(f_hat: dict[int, float], truth_f: dict[int, float], what: str) -> None:
+    judged = [k for k in range(ONSET + RATE, ONSET + FLIGHT_STEPS - RATE) if k in f_hat and k in truth_f]
+    assert len(judged) >= 0.95 * (FLIGHT_STEPS - ONSET - 2 * RATE), f"{what}: only {len(judged)} samples to judge"
+    assert all(abs(truth_f[k] - BIAS) < 1e-9 for k in judged), "the truth stream's fault is not the bias flown"
+    errors = np.array([f_hat[k] - truth_f[k] for k in judged])
+    worst = int(np.argmax(np.abs(errors)))
+    assert np.max(np.abs(errors)) <= 0.05 * BIAS, (
+        f"{what}: |f_hat - f| up to {np.max(np.abs(errors)):.3f} deg at k = {judged[worst]} "
+        f"(RMS {np.sqrt(np.mean(errors ** 2)):.3f})")
+
+
+def test_excite_identify_design_and_close_the_loop_on_jsbsim(tmp_path: Path) -> None:
+    from monitor.api import read_recording
+
+    # 1. the identification flight, recorded by MAVProxy
+    tlog = _through_mavproxy(tmp_path, "excite", EXCITE_STEPS, ["--excite", "prbs:1:60", "--speedup", "10"],
+                             None, free_udp_port())
+    plant = tmp_path / "c172p.toml"
+    ident = json.loads(_cli("monitor", "identify", str(tlog), "--out", str(plant), "--json").stdout)
+    assert min(ident["fit_percent"][name] for name in ("alpha", "q")) >= 90.0, ident["fit_percent"]
+
+    # 2. gains for it, certified and independently verified
+    gains = tmp_path / "gains.toml"
+    _cli("monitor", "design", "--plant", str(plant), "--out", str(gains), "--quiet")
+    _cli("monitor", "verify", "--plant", str(plant), "--gains", str(gains))
+
+    # 3. the closed loop on the nonlinear aircraft with a 2 deg bias, through MAVProxy
+    port = free_udp_port()
+    rrd = tmp_path / "closed.rrd"
+    truth = tmp_path / "truth.jsonl"
+    monitor = Daemon("monitor", ["run", "--plant", str(plant), "--gains", str(gains), "--mavlink",
+                                 f"udpin:127.0.0.1:{port}", "--zenoh-listen", f"tcp/127.0.0.1:{free_tcp_port()}",
+                                 "--rrd", str(rrd), "--name", "aircraft"], tmp_path / "monitor.log")
+    with monitor:
+        wait_ready(monitor)
+        assert "operating point" in monitor.log(), monitor.log()[-2000:]
+        flight = _through_mavproxy(tmp_path, "closed", FLIGHT_STEPS,
+                                   ["--fault", f"bias:{BIAS:g}@{ONSET}", "--speedup", "2", "--truth-jsonl", str(truth)],
+                                   monitor, port)
+        monitor.signal()  # SIGTERM: the summary line and a complete recording
+        assert monitor.wait(30) == 0, monitor.log()[-3000:]
+    assert processed_count(monitor.log()) >= FLIGHT_STEPS - 5, monitor.log()[-2000:]
+    truth_f = {p["k"]: float(p["f"][0]) for p in map(json.loads, truth.read_text().splitlines()) if p["f"]}
+    live = read_recording(rrd).vehicles[1].samples
+    _assert_tracks_the_bias(_f_hat_by_k(live), truth_f, "closed loop, live")
+
+    # 4. observe-only on the same flight: analyse reads MAVProxy's tlog of it
+    analysed = tmp_path / "analysed.rrd"
+    _cli("monitor", "analyse", str(flight), "--plant", str(plant), "--gains", str(gains), "--rrd", str(analysed))
+    offline = read_recording(analysed).vehicles[1].samples
+    _assert_tracks_the_bias(_f_hat_by_k(offline), truth_f, "observe-only over the tlog")
