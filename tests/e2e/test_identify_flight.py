@@ -4,12 +4,9 @@
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 import tomllib
-
-import pytest
 
 from monitor.model.plant import load_plant
 from tests.test_identify import fly, write_tlog
@@ -19,9 +16,9 @@ def _cli(*argv: str, timeout: float = 150.0) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "monitor", *argv], capture_output=True, text=True, timeout=timeout)
 
 
-@pytest.mark.timeout(240)
-def test_identify_then_design_and_verify_the_plant_it_wrote(tmp_path) -> None:
-    log, plant_file, gains = tmp_path / "c172p.tlog", tmp_path / "c172p.toml", tmp_path / "gains.toml"
+def test_identify_writes_a_plant_the_chain_takes_as_it_is(tmp_path) -> None:
+    """On a log written here (not by sim-vehicle); design and verify on such a plant: tests/e2e/test_aircraft_chain.py."""
+    log, plant_file = tmp_path / "c172p.tlog", tmp_path / "c172p.toml"
     write_tlog(log, fly())
 
     proc = _cli("identify", str(log), "--out", str(plant_file))
@@ -30,14 +27,8 @@ def test_identify_then_design_and_verify_the_plant_it_wrote(tmp_path) -> None:
     assert "Traceback" not in proc.stderr
     plant = load_plant(plant_file)
     assert plant.n == 4 and tomllib.loads(plant_file.read_text())["identification"]["model"] == "longitudinal"
-
-    proc = _cli("design", "--plant", str(plant_file), "--out", str(gains), "--quiet")
-    assert proc.returncode == 0, proc.stderr
-    assert tomllib.loads(gains.read_text())["gains"]["plant_hash"] == plant.digest
-
-    proc = _cli("verify", "--plant", str(plant_file), "--gains", str(gains), "--json")
-    assert proc.returncode == 0, proc.stderr + proc.stdout
-    assert json.loads(proc.stdout)["stable"] is True
+    assert plant.signals is not None and set(plant.signals["operating_point"]) == {"alpha", "q", "theta", "airspeed",
+                                                                                  "elevator"}
 
 
 def test_identify_refusals_are_one_line_and_exit_2(tmp_path) -> None:

@@ -212,8 +212,10 @@ def test_subscribe_command_prints_json_lines_and_stops_on_sigterm(tmp_path: Path
             counted = subprocess.Popen([*cmd, "--count", "5"], stdout=subprocess.PIPE, text=True)
             endless = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
             try:
-                with sim_daemon(tmp_path, port, bus, 4, steps=20):
-                    out, _ = counted.communicate(timeout=30)
+                # a long flight, stopped as soon as the counted subscriber has its lines: a subscriber that
+                # starts slowly (imports and a Zenoh session take seconds on a loaded machine) misses a short one
+                with sim_daemon(tmp_path, port, bus, 4, steps=400, speedup=10):
+                    out, _ = counted.communicate(timeout=45)
                 lines = [json.loads(line) for line in out.splitlines()]
                 assert counted.returncode == 0 and len(lines) == 5 and {e["sysid"] for e in lines} == {4}
                 endless.send_signal(signal.SIGTERM)
