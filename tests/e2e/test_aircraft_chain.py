@@ -32,22 +32,19 @@ def _cli(module: str, *args: str, timeout: float = 120) -> subprocess.CompletedP
     return out
 
 
-def _through_mavproxy(tmp_path: Path, name: str, steps: int, vehicle_args: list[str], monitor: Daemon | None,
-                      monitor_port: int) -> Path:
-    """Fly ``steps`` samples of c172p through a MAVProxy that writes ``<name>.tlog``; returns the tlog."""
-    d = tmp_path / name
-    d.mkdir()
-    master = free_udp_port()
-    with MavProxy(d, master, monitor_port) as mp:
-        vehicle = Daemon("sim_vehicle", ["run", "--aircraft", "c172p", "--airspeed", "100", "--altitude", "3000",
-                                         "--rate", str(RATE), "--steps", str(steps), "--mavlink",
-                                         f"udpout:127.0.0.1:{master}", "--no-zenoh", *vehicle_args],
-                         d / "vehicle.log")
-        with vehicle:
-            assert vehicle.wait(120) == 0, vehicle.log()[-3000:]
-        wait_for(lambda: mp.tlog.exists() and _tlog_counts(mp.tlog)[("AOA_SSA", 1)] >= steps - 1, 15,
-                 what="MAVProxy's tlog to hold the flight")
-        return mp.tlog
+def _fly(d: Path, master: int, sysid: int, steps: int, *vehicle_args: str) -> None:
+    """Fly ``steps`` samples of c172p as ``sysid`` into MAVProxy's master port and wait for the vehicle to finish."""
+    vehicle = Daemon("sim_vehicle", ["run", "--aircraft", "c172p", "--airspeed", "100", "--altitude", "3000",
+                                     "--rate", str(RATE), "--sysid", str(sysid), "--steps", str(steps), "--mavlink",
+                                     f"udpout:127.0.0.1:{master}", "--no-zenoh", *vehicle_args],
+                     d / f"vehicle{sysid}.log")
+    with vehicle:
+        assert vehicle.wait(120) == 0, vehicle.log()[-3000:]
+
+
+def _logged(mp: MavProxy, sysid: int, steps: int) -> None:
+    wait_for(lambda: mp.tlog.exists() and _tlog_counts(mp.tlog)[("AOA_SSA", sysid)] >= steps - 1, 15,
+             what=f"MAVProxy's tlog to hold vehicle {sysid}'s flight")
 
 
 def _f_hat_by_k(rows) -> dict[int, float]:
@@ -68,40 +65,47 @@ def _assert_tracks_the_bias(f_hat: dict[int, float], truth_f: dict[int, float], 
 def test_excite_identify_design_and_close_the_loop_on_jsbsim(tmp_path: Path) -> None:
     from monitor.api import read_recording
 
-    # 1. the identification flight, recorded by MAVProxy
-    tlog = _through_mavproxy(tmp_path, "excite", EXCITE_STEPS, ["--excite", "prbs:1:60", "--speedup", "10"],
-                             None, free_udp_port())
-    plant = tmp_path / "c172p.toml"
-    ident = json.loads(_cli("monitor", "identify", str(tlog), "--out", str(plant), "--json").stdout)
-    assert min(ident["fit_percent"][name] for name in ("alpha", "q")) >= 90.0, ident["fit_percent"]
-
-    # 2. gains for it, certified and independently verified
-    gains = tmp_path / "gains.toml"
-    _cli("monitor", "design", "--plant", str(plant), "--out", str(gains), "--quiet")
-    _cli("monitor", "verify", "--plant", str(plant), "--gains", str(gains))
-
-    # 3. the closed loop on the nonlinear aircraft with a 2 deg bias, through MAVProxy
+    # One MAVProxy for both flights, as a user's ground station stays up: vehicle 1 flies the identification
+    # manoeuvre while nothing listens behind MAVProxy yet; vehicle 2 then flies closed loop through it.
     port = free_udp_port()
-    rrd = tmp_path / "closed.rrd"
-    truth = tmp_path / "truth.jsonl"
-    monitor = Daemon("monitor", ["run", "--plant", str(plant), "--gains", str(gains), "--mavlink",
-                                 f"udpin:127.0.0.1:{port}", "--zenoh-listen", f"tcp/127.0.0.1:{free_tcp_port()}",
-                                 "--rrd", str(rrd), "--name", "aircraft"], tmp_path / "monitor.log")
-    with monitor:
-        wait_ready(monitor)
-        assert "operating point" in monitor.log(), monitor.log()[-2000:]
-        flight = _through_mavproxy(tmp_path, "closed", FLIGHT_STEPS,
-                                   ["--fault", f"bias:{BIAS:g}@{ONSET}", "--speedup", "3", "--truth-jsonl", str(truth)],
-                                   monitor, port)
-        monitor.signal()  # SIGTERM: the summary line and a complete recording
-        assert monitor.wait(30) == 0, monitor.log()[-3000:]
+    master = free_udp_port()
+    with MavProxy(tmp_path, master, port) as mp:
+        # 1. the identification flight
+        _fly(tmp_path, master, 1, EXCITE_STEPS, "--excite", "prbs:1:60", "--speedup", "10")
+        _logged(mp, 1, EXCITE_STEPS)
+        plant = tmp_path / "c172p.toml"
+        ident = json.loads(_cli("monitor", "identify", str(mp.tlog), "--sysid", "1", "--out", str(plant),
+                                "--json").stdout)
+        assert min(ident["fit_percent"][name] for name in ("alpha", "q")) >= 90.0, ident["fit_percent"]
+
+        # 2. gains for it, certified and independently verified
+        gains = tmp_path / "gains.toml"
+        _cli("monitor", "design", "--plant", str(plant), "--out", str(gains), "--quiet")
+        _cli("monitor", "verify", "--plant", str(plant), "--gains", str(gains))
+
+        # 3. the closed loop on the nonlinear aircraft with a 2 deg bias, through MAVProxy
+        rrd = tmp_path / "closed.rrd"
+        truth = tmp_path / "truth.jsonl"
+        monitor = Daemon("monitor", ["run", "--plant", str(plant), "--gains", str(gains), "--mavlink",
+                                     f"udpin:127.0.0.1:{port}", "--zenoh-listen", f"tcp/127.0.0.1:{free_tcp_port()}",
+                                     "--rrd", str(rrd), "--name", "aircraft"], tmp_path / "monitor.log")
+        with monitor:
+            wait_ready(monitor)
+            assert "operating point" in monitor.log(), monitor.log()[-2000:]
+            _fly(tmp_path, master, 2, FLIGHT_STEPS, "--fault", f"bias:{BIAS:g}@{ONSET}", "--speedup", "3",
+                 "--truth-jsonl", str(truth))
+            _logged(mp, 2, FLIGHT_STEPS)
+            monitor.signal()  # SIGTERM: the summary line and a complete recording
+            assert monitor.wait(30) == 0, monitor.log()[-3000:]
+        flight = mp.tlog
     assert processed_count(monitor.log()) >= FLIGHT_STEPS - 5, monitor.log()[-2000:]
     truth_f = {p["k"]: float(p["f"][0]) for p in map(json.loads, truth.read_text().splitlines()) if p["f"]}
-    live = read_recording(rrd).vehicles[1].samples
+    live = read_recording(rrd).vehicles[2].samples
     _assert_tracks_the_bias(_f_hat_by_k(live), truth_f, "closed loop, live")
 
     # 4. observe-only on the same flight: analyse reads MAVProxy's tlog of it
     analysed = tmp_path / "analysed.rrd"
-    _cli("monitor", "analyse", str(flight), "--plant", str(plant), "--gains", str(gains), "--rrd", str(analysed))
-    offline = read_recording(analysed).vehicles[1].samples
+    _cli("monitor", "analyse", str(flight), "--sysid", "2", "--plant", str(plant), "--gains", str(gains),
+         "--rrd", str(analysed))
+    offline = read_recording(analysed).vehicles[2].samples
     _assert_tracks_the_bias(_f_hat_by_k(offline), truth_f, "observe-only over the tlog")

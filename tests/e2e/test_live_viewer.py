@@ -118,8 +118,10 @@ def test_a_viewer_that_dies_or_never_answers_costs_neither_the_loop_nor_the_file
         with monitor_daemon(tmp_path, gains_file, port, bus, "lossy", "--rrd", str(rrd), "--rerun-url", url,
                             "--rerun-url", nobody) as monitor:
             wait_ready(monitor)
+            # 15x: a sample every 67 ms, a command budget of 31 ms; at 30x, with the suite's other worker on the
+            # second core, 9 of 90 commands came late (a CI run), which is the CPU, not the viewer under test
             with sim_daemon(tmp_path, port, bus, 1, "--fault", "bias:2@20", "--summary-json", str(summary),
-                            steps=steps, speedup=30) as sim:
+                            steps=steps, speedup=15) as sim:
                 wait_for(lambda: len(estimates) >= 40, 20, what="40 estimates")
                 os.killpg(viewer.pid, signal.SIGKILL)  # the viewer is gone mid-run, without a goodbye
                 viewer.wait(5)
