@@ -1,0 +1,23 @@
+"""Test-session configuration shared by every module.
+
+Why the end-to-end tests form one xdist group: they start daemons that pace themselves on the wall clock at a
+speed-up (a sample every 40 ms at 25x), and their verdicts (commands in time, settling) hold only while the
+real path stays within the plant's delay interval. Two of them at once on a 2-core machine, each with a
+monitor, a vehicle and a Zenoh bus, pushed true delays past the interval in a CI run (settling 8 samples after
+onset instead of 2-6). In one group they run one after another on one worker, while the other worker takes
+the unit tests.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+E2E = Path(__file__).parent / "e2e"
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        if E2E in Path(str(item.fspath)).parents:
+            item.add_marker(pytest.mark.xdist_group("e2e-daemons"))
