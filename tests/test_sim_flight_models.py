@@ -21,23 +21,10 @@ from sim_vehicle.flight_model import FlightModel
 from sim_vehicle.jsbsim_model import AircraftSpec, JSBSimFlightModel
 from sim_vehicle.simulation import Simulation
 from sim_vehicle.telemetry import AircraftSample, encode_aircraft_sample
+from tests.test_sim_simulation import Recorder
 
 PLANT = load_plant("paper-continuous")
 CONTRACT_KEYS = {"sysid", "k", "t", "x", "f", "d", "tau"}
-
-
-class Recorder:
-    def __init__(self) -> None:
-        self.samples, self.truth, self.heartbeats = [], [], 0
-
-    def send_sample(self, sample) -> None:
-        self.samples.append(sample)
-
-    def send_heartbeat(self) -> None:
-        self.heartbeats += 1
-
-    def publish_truth(self, payload) -> None:
-        self.truth.append(payload)
 
 
 def models() -> list[FlightModel]:

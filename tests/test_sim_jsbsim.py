@@ -20,23 +20,10 @@ from sim_vehicle.excitation import Excitation
 from sim_vehicle.jsbsim_model import AircraftSpec, JSBSimFlightModel, jsbsim_seed, step_size
 from sim_vehicle.simulation import Simulation
 from sim_vehicle.telemetry import AircraftSample
+from tests.test_sim_simulation import Recorder
 
 REPO = Path(__file__).resolve().parent.parent
 KT = 1852.0 / 3600.0
-
-
-class Recorder:
-    def __init__(self) -> None:
-        self.samples, self.truth, self.heartbeats = [], [], 0
-
-    def send_sample(self, sample) -> None:
-        self.samples.append(sample)
-
-    def send_heartbeat(self) -> None:
-        self.heartbeats += 1
-
-    def publish_truth(self, payload) -> None:
-        self.truth.append(payload)
 
 
 def c172p(**kw) -> JSBSimFlightModel:

@@ -20,6 +20,8 @@ PLANT = load_plant("paper-continuous")
 
 
 class Recorder:
+    """The simulation's Sink, keeping what the vehicle sent (shared by the sim_vehicle test modules)."""
+
     def __init__(self) -> None:
         self.samples, self.truth, self.heartbeats = [], [], 0
 
