@@ -2,7 +2,7 @@
 
 Why our own reader rather than Rerun's dataframe API: in rerun-sdk 0.41 that API needs the ``catalog``
 extra (datafusion, pandas); ``rerun.chunk.RrdReader`` + pyarrow ship with the base wheel, and the
-entity layout is ours (``monitor.service.recorder``), so rebuilding the ``SampleRecord``/``TruthRecord``
+entity layout is ours (``monitor.service.rrd_stream``), so rebuilding the ``SampleRecord``/``TruthRecord``
 rows is a small, exact inverse of what the recorder wrote.
 
 Where the fault comes from, in order: the truth stream recorded beside the estimates (``truth/f``),
@@ -25,7 +25,7 @@ import numpy as np
 
 from monitor.checks import metrics
 from monitor.errors import UserError
-from monitor.service.recorder import (
+from monitor.service.rrd_stream import (
     PROPERTY_NAME,
     SAMPLE_SCALARS,
     SAMPLE_VECTORS,

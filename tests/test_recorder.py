@@ -198,7 +198,7 @@ def test_recording_properties_describe_plant_and_gains(tmp_path: Path) -> None:
 
     from monitor.model.closed_loop import Gains
     from monitor.model.plant import load_plant
-    from monitor.service.recorder import recording_properties
+    from monitor.service.rrd_stream import recording_properties
 
     plant = load_plant("paper")
     gains = Gains(L=np.full((plant.n, plant.l), 0.5), M=np.full((plant.q, plant.l), 0.1),

@@ -65,34 +65,9 @@ from monitor.errors import UserError
 from monitor.service.records import SampleRecord, TruthRecord
 
 from monitor.service.live_sinks import LiveSink, parse_viewer_url
-from monitor.service.rrd_stream import (
-    LAYOUT_VERSION,
-    PROPERTY_NAME,
-    SAMPLE_SCALARS,
-    SAMPLE_VECTORS,
-    TRUTH_SCALARS,
-    TRUTH_VECTORS,
-    StreamWriter,
-    default_blueprint,
-    open_stream,
-    recording_properties,
-    software_versions,
-)
+from monitor.service.rrd_stream import LAYOUT_VERSION, StreamWriter, default_blueprint, open_stream, software_versions
 
-__all__ = [
-    "RrdRecorder",
-    "StreamWriter",
-    "open_stream",
-    "LAYOUT_VERSION",
-    "PROPERTY_NAME",
-    "SAMPLE_SCALARS",
-    "SAMPLE_VECTORS",
-    "TRUTH_SCALARS",
-    "TRUTH_VECTORS",
-    "software_versions",
-    "recording_properties",
-    "default_blueprint",
-]
+__all__ = ["RrdRecorder"]  # the layout and the stream writer are monitor.service.rrd_stream's
 
 log = logging.getLogger(__name__)
 
