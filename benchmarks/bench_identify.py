@@ -31,7 +31,8 @@ def in_process(log: Path) -> tuple[float, float, int]:
 
     import numpy as np
 
-    from monitor.commands.identify import IDENTIFY_SIGNALS_TOML, _map_for, log_spacing, read_flight
+    from monitor.commands.identify import IDENTIFY_SIGNALS_TOML, _map_for
+    from monitor.link.flight_log import log_spacing, read_flight
     from monitor.model.identification import MODELS, FlightData, identify
 
     states = MODELS["longitudinal"]

@@ -9,8 +9,6 @@ it was designed for, so that ``verify`` can re-check the certificate and ``run``
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -20,6 +18,7 @@ import numpy as np
 from monitor.model.closed_loop import Gains
 from monitor.design.result import DesignResult
 from monitor.errors import UserError
+from monitor.files import write_text_atomically
 from monitor.model.plant import Plant
 
 __all__ = ["GainsFile", "write_gains", "read_gains", "parse_gain_matrix"]
@@ -81,20 +80,7 @@ def write_gains(path: str | Path, result: DesignResult, plant: Plant) -> None:
     }
     if result.certificate:
         doc["certificate"] = {k: _rows(v) for k, v in result.certificate.items()}
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name, dir=path.parent)
-    try:
-        # mkstemp creates 0600; a gains file is no secret: give it the mode any file the user writes gets
-        umask = os.umask(0)
-        os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(_to_toml(doc))
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text_atomically(path, _to_toml(doc))
 
 
 def _toml_value(value: Any) -> str:

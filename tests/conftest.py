@@ -6,6 +6,9 @@ real path stays within the plant's delay interval. Two of them at once on a 2-co
 monitor, a vehicle and a Zenoh bus, pushed true delays past the interval in a CI run (settling 8 samples after
 onset instead of 2-6). In one group they run one after another on one worker, while the other worker takes
 the unit tests.
+
+Why every other module is a group of its own: a module-scoped fixture (a margin search, a design through the CLI)
+runs once per worker that gets one of the module's tests; spread over two workers it ran twice (16 s each).
 """
 
 from __future__ import annotations
@@ -19,5 +22,6 @@ E2E = Path(__file__).parent / "e2e"
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
-        if E2E in Path(str(item.fspath)).parents:
-            item.add_marker(pytest.mark.xdist_group("e2e-daemons"))
+        path = Path(str(item.fspath))
+        group = "e2e-daemons" if E2E in path.parents else f"module-{path.stem}"
+        item.add_marker(pytest.mark.xdist_group(group))

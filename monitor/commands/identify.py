@@ -12,19 +12,20 @@ field and is a latest value of the signal map (sample and hold, ``monitor/link/a
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import math
-import os
 import sys
-import tempfile
 import time
 import tomllib
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["IDENTIFY_SIGNALS_TOML", "FlightLog", "log_spacing", "read_flight", "register"]
+from monitor.files import write_text_atomically
+from monitor.link.flight_log import FlightLog, log_spacing, read_flight
+
+__all__ = ["IDENTIFY_SIGNALS_TOML", "IdentifyRequest", "IdentifiedLog", "identify_log", "register"]
 
 IDENTIFY_SIGNALS_TOML = """
 [signals]
@@ -45,7 +46,6 @@ group = 0
 
 DEFAULT_ACTUATOR_LIMIT = 25.0
 TAU_MAX_FRACTION = 0.46  # of h: the paper's interval [0, 0.4612 h]
-_PROBE_INSTANTS = 400  # instant messages looked at to find the log's sample spacing
 _LONG_LOG_RECORDS = 20_000  # a log this long gets progress lines on stderr (a 5-min 20 Hz log has ~24,000)
 
 
@@ -130,98 +130,6 @@ def _field_of(spec: Any) -> str:
     return str(spec.get("field") if isinstance(spec, dict) else spec)
 
 
-# --- the log --------------------------------------------------------------------------------------------------
-class FlightLog:
-    """What ``read_flight`` found: per system id the samples (k, values), and what was seen."""
-
-    def __init__(self) -> None:
-        self.samples: dict[int, list[tuple[int, dict[str, float]]]] = {}
-        self.seen: dict[int, dict[str, int]] = {}
-        self.records = 0
-        self.skipped_bytes = 0
-        self.truncated = False
-        self.counters: dict[str, int] = {}
-
-
-def log_spacing(path: str, instant: str, sysid: int | None) -> float | None:
-    """The median spacing of the instant message's ``time_usec`` over the first few hundred (s), or None."""
-    from monitor.link.dialect import layout_by_name
-    from monitor.link.frames import FrameCounters, FrameParser
-    from monitor.link.tlog import read_tlog
-
-    layout = layout_by_name(instant)
-    if layout is None or layout.time_field() is None:
-        return None
-    pos = layout.position(layout.time_field()[0])
-    unit = layout.time_field()[1]
-    parser = FrameParser(FrameCounters())
-    stamps: list[int] = []
-    for _t, frame in read_tlog(path):
-        for msgid, sys_, _c, payload in parser.feed(frame):
-            if msgid == layout.msgid and (sysid is None or sys_ == sysid):
-                stamps.append(int(layout.decode(payload)[pos]) * unit)
-        if len(stamps) >= _PROBE_INSTANTS:
-            break
-    steps = sorted(b - a for a, b in itertools.pairwise(stamps) if b > a)
-    if not steps:
-        return None
-    return steps[len(steps) // 2] / 1e6
-
-
-def read_flight(path: str, smap, h: float, sysid: int | None = None,
-                progress: Callable[[float, int], None] | None = None, progress_every_s: float = 2.0) -> FlightLog:
-    """Every sample of every vehicle (only ``sysid``'s if given), assembled as ``analyse`` assembles them."""
-    from monitor.link.assembly import SampleAssembler
-    from monitor.link.dialect import layout_by_name
-    from monitor.link.frames import FrameCounters, FrameParser
-    from monitor.link.tlog import TlogStats, read_tlog
-
-    wanted = {}
-    for name in {smap.instant, *(s.message for s in smap.measured.values())}:
-        layout = layout_by_name(name)
-        wanted[layout.msgid] = (layout.name, layout)
-    counters = FrameCounters()
-    parser = FrameParser(counters)
-    stats = TlogStats()
-    out = FlightLog()
-    assemblers: dict[int, SampleAssembler] = {}
-    size = max(os.path.getsize(path), 1)
-    position = 0
-    start = time.perf_counter()
-    next_report = start + progress_every_s
-
-    def keep(sys_: int, ready) -> None:
-        out.samples.setdefault(sys_, []).extend((sample.k, sample.values) for sample in ready)
-
-    for t_us, frame in read_tlog(path, stats):
-        position += 8 + len(frame)
-        for msgid, sys_, _compid, payload in parser.feed(frame):
-            entry = wanted.get(msgid)
-            if entry is None or (sysid is not None and sys_ != sysid):
-                continue
-            name, layout = entry
-            seen = out.seen.setdefault(sys_, {})
-            seen[name] = seen.get(name, 0) + 1
-            values = layout.decode(payload)
-            asm = assemblers.get(sys_)
-            if asm is None:
-                asm = assemblers[sys_] = SampleAssembler(smap, h, observe=True)
-            if asm.uses(name):
-                keep(sys_, asm.add(name, values, None, t_us * 1e-6))
-        if progress is not None and stats.records % 4096 == 0 and time.perf_counter() >= next_report:
-            next_report = time.perf_counter() + progress_every_s
-            progress(position / size, sum(len(v) for v in out.samples.values()))
-    for sys_, asm in assemblers.items():
-        keep(sys_, asm.flush(math.inf))
-    out.records, out.skipped_bytes, out.truncated = stats.records, stats.skipped_bytes, stats.truncated
-    totals: dict[str, int] = counters.as_dict()
-    for asm in assemblers.values():
-        for key, value in asm.counters.as_dict().items():
-            totals[key] = totals.get(key, 0) + value
-    out.counters = totals
-    return out
-
-
 def _missing_signals(flight: FlightLog, sysid: int, written: dict[str, Any], states: tuple[str, ...],
                      model: str) -> str | None:
     """A one-line reason when a signal identify needs never appears for ``sysid`` (None when all are there)."""
@@ -246,53 +154,110 @@ def _missing_signals(flight: FlightLog, sysid: int, written: dict[str, Any], sta
 
 
 # --- the command ----------------------------------------------------------------------------------------------
-def run(args: argparse.Namespace) -> int:
+@dataclass(frozen=True)
+class IdentifyRequest:
+    """What to identify from which log, and where the plant file goes (the command's options, as data)."""
+
+    log: str
+    out: str
+    model: str = "longitudinal"
+    h: float | None = None
+    tau_max: float | None = None
+    actuator_limit: float = DEFAULT_ACTUATOR_LIMIT
+    signals: str | None = None
+    sysid: int | None = None
+    name: str | None = None
+
+
+@dataclass
+class IdentifiedLog:
+    """A plant file written from a log: the identification, and what was read to get it."""
+
+    request: IdentifyRequest
+    result: Any  # monitor.model.identification.Identification
+    sysid: int
+    tau_max: float
+    units: tuple[str, ...]
+    flight: FlightLog
+    seconds: float
+
+    def report(self) -> dict[str, Any]:
+        """``--json``'s document."""
+        r, f = self.request, self.flight
+        return {"source_log": str(r.log), "sysid": self.sysid, "model": r.model, "out": str(r.out),
+                "name": r.name or Path(r.out).stem, "tau_max": self.tau_max, "actuator_limit": r.actuator_limit,
+                **self.result.report(),
+                "log": {"records": f.records, "skipped_bytes": f.skipped_bytes, "truncated": f.truncated,
+                        "seconds": round(self.seconds, 3), **f.counters}}
+
+
+def _checked(req: IdentifyRequest) -> None:
+    from monitor.errors import UserError
+
+    if not Path(req.log).is_file():
+        raise UserError(f"{req.log}: no such log file")
+    if req.sysid is not None and not 1 <= req.sysid <= 255:
+        raise UserError(f"--sysid must be a MAVLink system id 1-255, got {req.sysid}")
+    if req.h is not None and not (math.isfinite(req.h) and req.h > 0):
+        raise UserError(f"--h must be a positive number of seconds, got {req.h}")
+    if not (math.isfinite(req.actuator_limit) and req.actuator_limit > 0):
+        raise UserError(f"--actuator-limit must be a positive number of degrees, got {req.actuator_limit}")
+
+
+def _periods(req: IdentifyRequest, smap) -> tuple[float, int, float]:
+    """``(h_read, ratio, tau_max)``: the log's own spacing, the decimation to the plant's h, and the delay bound."""
+    from monitor.errors import UserError
+
+    spacing = log_spacing(req.log, smap.instant, req.sysid)
+    h_read = spacing or req.h or 0.05
+    ratio = 1
+    if req.h is not None and spacing is not None:
+        ratio = int(round(req.h / spacing))
+        if ratio < 1 or abs(req.h - ratio * spacing) > 1e-6 * req.h:
+            raise UserError(f"--h {req.h:g} s must be a whole multiple of the log's sample spacing {spacing:g} s")
+    h = h_read * ratio
+    if req.tau_max is not None and not (math.isfinite(req.tau_max) and 0 <= req.tau_max < h):
+        raise UserError(f"--tau-max must satisfy 0 <= tau_max < h = {h:g} s, got {req.tau_max}")
+    tau_max = req.tau_max if req.tau_max is not None else round(TAU_MAX_FRACTION * h, 9)
+    return h_read, ratio, tau_max
+
+
+def _vehicle(req: IdentifyRequest, flight: FlightLog, written: dict[str, Any]) -> int:
+    """The one system id to identify: the one asked for, or the only one with samples (else a one-line error)."""
+    from monitor.errors import UserError
+
+    with_samples = sorted(s for s, rows in flight.samples.items() if rows)
+    if req.sysid is None and len(with_samples) > 1:
+        raise UserError(f"{req.log}: the log holds samples of vehicles {', '.join(map(str, with_samples))}: choose "
+                        "one with --sysid")
+    candidates = [req.sysid] if req.sysid is not None else (with_samples or sorted(flight.seen) or [])
+    if not candidates:
+        raise UserError(f"missing signals: {req.log} holds none of the messages the signal map reads "
+                        f"({', '.join(sorted({_field_of(v).partition('.')[0] for v in written['measured'].values()}))}"
+                        f"; {flight.records} records)")
+    return candidates[0]
+
+
+def identify_log(req: IdentifyRequest, say: Callable[[str], None] = lambda _text: None) -> IdentifiedLog:
+    """Read ``req.log``, identify the model, write ``req.out`` (loadable as it is); UserError names what is wrong."""
     import numpy as np
 
     from monitor.errors import UserError
     from monitor.model.identification import MODELS, FlightData, identify, plant_toml
     from monitor.model.plant import parse_plant
 
-    path = args.tlog
-    if not Path(path).is_file():
-        raise UserError(f"{path}: no such log file")
-    if args.sysid is not None and not 1 <= args.sysid <= 255:
-        raise UserError(f"--sysid must be a MAVLink system id 1-255, got {args.sysid}")
-    if args.h is not None and not (math.isfinite(args.h) and args.h > 0):
-        raise UserError(f"--h must be a positive number of seconds, got {args.h}")
-    if not (math.isfinite(args.actuator_limit) and args.actuator_limit > 0):
-        raise UserError(f"--actuator-limit must be a positive number of degrees, got {args.actuator_limit}")
-    states = MODELS[args.model]
-    table, source = _signals_table(args.signals)
+    _checked(req)
+    states = MODELS[req.model]
+    table, source = _signals_table(req.signals)
     smap, written = _map_for(table, source, states)
-    say = (lambda text: print(f"identify: {text}", file=sys.stderr, flush=True))
-
-    spacing = log_spacing(path, smap.instant, args.sysid)
-    h_read = spacing or args.h or 0.05
-    ratio = 1
-    if args.h is not None and spacing is not None:
-        ratio = int(round(args.h / spacing))
-        if ratio < 1 or abs(args.h - ratio * spacing) > 1e-6 * args.h:
-            raise UserError(f"--h {args.h:g} s must be a whole multiple of the log's sample spacing {spacing:g} s")
+    h_read, ratio, tau_max = _periods(req, smap)
     h = h_read * ratio
-    if args.tau_max is not None and not (math.isfinite(args.tau_max) and 0 <= args.tau_max < h):
-        raise UserError(f"--tau-max must satisfy 0 <= tau_max < h = {h:g} s, got {args.tau_max}")
-    tau_max = args.tau_max if args.tau_max is not None else round(TAU_MAX_FRACTION * h, 9)
 
     started = time.perf_counter()
-    flight = read_flight(path, smap, h_read, args.sysid,
-                         progress=lambda f, n: say(f"{f:.0%} of {path}, {n} samples"))
-    with_samples = sorted(s for s, rows in flight.samples.items() if rows)
-    if args.sysid is None and len(with_samples) > 1:
-        raise UserError(f"{path}: the log holds samples of vehicles {', '.join(map(str, with_samples))}: choose one "
-                        "with --sysid")
-    candidates = [args.sysid] if args.sysid is not None else (with_samples or sorted(flight.seen) or [])
-    if not candidates:
-        raise UserError(f"missing signals: {path} holds none of the messages the signal map reads "
-                        f"({', '.join(sorted({_field_of(v).partition('.')[0] for v in written['measured'].values()}))}"
-                        f"; {flight.records} records)")
-    sysid = candidates[0]
-    reason = _missing_signals(flight, sysid, written, states, args.model)
+    flight = read_flight(req.log, smap, h_read, req.sysid,
+                         progress=lambda f, n: say(f"{f:.0%} of {req.log}, {n} samples"))
+    sysid = _vehicle(req, flight, written)
+    reason = _missing_signals(flight, sysid, written, states, req.model)
     if reason:
         raise UserError(reason)
     rows = flight.samples.get(sysid, [])
@@ -311,35 +276,41 @@ def run(args: argparse.Namespace) -> int:
                                  state_units=units))
     seconds = time.perf_counter() - started
 
-    out = Path(args.out)
-    name = args.name or out.stem
-    limit_source = ("given with --actuator-limit" if args.actuator_limit != DEFAULT_ACTUATOR_LIMIT else
+    out = Path(req.out)
+    name = req.name or out.stem
+    custom_limit = req.actuator_limit != DEFAULT_ACTUATOR_LIMIT
+    limit_source = ("given with --actuator-limit" if custom_limit else
                     "a safe default: a log shows the deflections flown, not the stops; check them")
-    header = [f"Identified by fault-monitor identify from {Path(path).name} (sysid {sysid}), model {args.model}.",
+    header = [f"Identified by fault-monitor identify from {Path(req.log).name} (sysid {sysid}), model {req.model}.",
               "States are deviations from [signals] operating_point, in "
               + ", ".join(f"{s_} {u}".rstrip() for s_, u in zip(states, units)) + f"; input: {actuator} deg.",
               "D_cf = B_c (an elevator fault); D_cd = the alpha column of A_c (a vertical gust as an alpha "
               "disturbance, deg)."]
-    description = (f"{args.model} model identified from {Path(path).name}: {result.samples} samples at "
+    description = (f"{req.model} model identified from {Path(req.log).name}: {result.samples} samples at "
                    f"h = {h:g} s, held-out fit "
                    + ", ".join(f"{s} {f:.1f} %" for s, f in result.fit_validation.items()))
     text = plant_toml(result, name=name, description=description, tau_max=tau_max,
-                      actuator_limit=args.actuator_limit, actuator_limit_source=limit_source, signals=written,
-                      source_log=str(path), model=args.model, header=header)
+                      actuator_limit=req.actuator_limit, actuator_limit_source=limit_source, signals=written,
+                      source_log=str(req.log), model=req.model, header=header)
     parse_plant(text, source=str(out))  # the file must load as it is: a plant the chain takes
-    _write_atomically(out, text)
+    try:
+        write_text_atomically(out, text)
+    except OSError as exc:
+        raise UserError(f"{out}: cannot write the plant file: {exc.strerror or exc}") from None
+    return IdentifiedLog(req, result, sysid, tau_max, units, flight, seconds)
 
+
+def run(args: argparse.Namespace) -> int:
+    req = IdentifyRequest(log=args.tlog, out=args.out, model=args.model, h=args.h, tau_max=args.tau_max,
+                          actuator_limit=args.actuator_limit, signals=args.signals, sysid=args.sysid, name=args.name)
+    done = identify_log(req, say=lambda text: print(f"identify: {text}", file=sys.stderr, flush=True))
     if args.json:
-        report = {"source_log": str(path), "sysid": sysid, "model": args.model, "out": str(out), "name": name,
-                  "tau_max": tau_max, "actuator_limit": args.actuator_limit, **result.report(),
-                  "log": {"records": flight.records, "skipped_bytes": flight.skipped_bytes,
-                          "truncated": flight.truncated, "seconds": round(seconds, 3), **flight.counters}}
-        print(json.dumps(report))
+        print(json.dumps(done.report()))
         return 0
-    print(_format(result, path, sysid, args.model, units))
-    print(f"wrote {out}: tau in [0, {tau_max:g}] s, actuator limit {args.actuator_limit:g} deg "
-          f"({'given' if args.actuator_limit != DEFAULT_ACTUATOR_LIMIT else 'default'}); "
-          f"{flight.records} log records in {seconds:.2f} s")
+    print(_format(done.result, req.log, done.sysid, req.model, done.units))
+    print(f"wrote {req.out}: tau in [0, {done.tau_max:g}] s, actuator limit {req.actuator_limit:g} deg "
+          f"({'given' if req.actuator_limit != DEFAULT_ACTUATOR_LIMIT else 'default'}); "
+          f"{done.flight.records} log records in {done.seconds:.2f} s")
     return 0
 
 
@@ -386,23 +357,3 @@ def _format(result, path: str, sysid: int, model: str, units: tuple[str, ...]) -
     for note in result.notes:
         lines.append(f"note: {note}")
     return "\n".join(lines)
-
-
-def _write_atomically(path: Path, text: str) -> None:
-    from monitor.errors import UserError
-
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=path.name, dir=path.parent)
-    except OSError as exc:
-        raise UserError(f"{path}: cannot write the plant file: {exc.strerror or exc}") from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except OSError as exc:
-        Path(tmp).unlink(missing_ok=True)
-        raise UserError(f"{path}: cannot write the plant file: {exc.strerror or exc}") from None
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
