@@ -137,3 +137,27 @@ def test_a_failed_row_widens_no_column():
     table = format_table([ran, Row.failed("robust-separate", "design failed: " + "x" * 200)]).splitlines()
     assert len(table[1]) == len(alone[1]) + len("robust-separate") - len("certified")  # only the name column grew
     assert table[3] == "robust-separate  design failed: " + "x" * 200
+
+
+def test_aircraft_rows_add_the_model_and_the_late_window():
+    ran = Row("certified", True, "valid", 2.49, 16.6, 900, 28, 0.102, 0.92, 0.41, 3, 0, model="longitudinal",
+              ef_late=0.00039, alpha_late=-0.002)
+    lines = format_table([ran, Row.failed("separate", "design failed: why", "short-period")]).splitlines()
+    head = lines[0].split("  ")
+    assert head[0].strip() == "model" and "|e_f| 30 s after, deg" in lines[0] and "alpha 30 s after, deg" in lines[0]
+    assert lines[2].startswith("longitudinal  certified") and "0.00039" in lines[2] and "-0.002" in lines[2]
+    assert lines[3].split() == ["short-period", "separate", "design", "failed:", "why"]
+    assert "model" not in format_table([dataclasses.replace(ran, model=None)])  # the paper's table is unchanged
+
+
+def test_late_window_is_the_second_ending_30_s_after_onset_and_none_when_the_run_is_shorter():
+    from monitor.demo.report import late_window
+
+    k = np.arange(0, 800)
+    f = np.where(k >= 100, 2.0, 0.0)
+    f_hat = f + np.where((k > 680) & (k <= 700), 0.5, 0.0)  # wrong only in the second ending at onset + 30 s
+    alpha = np.where(k > 680, 0.25, 0.0)
+    trace = montecarlo.Trace(k=k, f=f, f_hat=f_hat, alpha=alpha, q=alpha, u=alpha, tau=alpha, alarm=k > 100)
+    assert late_window(trace, 100, 20.0) == (pytest.approx(0.5), pytest.approx(0.25))
+    assert late_window(trace, 100, 20.0, late_s=40.0) == (None, None)
+    assert late_window(trace, None, 20.0) == (None, None)

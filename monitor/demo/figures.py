@@ -19,7 +19,7 @@ import numpy as np
 from monitor.demo.methods import look
 from monitor.demo.montecarlo import Trace
 
-__all__ = ["Panel", "write_figures"]
+__all__ = ["Panel", "write_figures", "write_identification_figure"]
 
 
 @dataclass(frozen=True)
@@ -48,9 +48,11 @@ def _limits(series: list[np.ndarray], floor: float) -> tuple[float, float]:
 
 
 def _panel(ax, runs: dict[str, Trace], panel: Panel, onset: int | None, title: str, unstable: frozenset[str],
-           xlabel: bool = True, failed: tuple[str, ...] = ()) -> None:
+           xlabel: bool = True, failed: tuple[str, ...] = (), h: float = 1.0,
+           clipped_note: str = "unstable loop: clipped") -> None:
     stable = [getattr(t, panel.field) for name, t in runs.items() if name not in unstable]
-    series = stable or [getattr(t, panel.field) for t in runs.values()]
+    # nothing stable: the fault panel keeps the true fault's scale (the estimate's question is how close to it)
+    series = stable or ([] if panel.truth else [getattr(t, panel.field) for t in runs.values()])
     if panel.truth:
         first = next(iter(runs.values()))
         ax.step(first.k, first.f, where="post", color="black", lw=2.0, zorder=2, label="true fault f")
@@ -68,7 +70,7 @@ def _panel(ax, runs: dict[str, Trace], panel: Panel, onset: int | None, title: s
         ax.plot(t.k, np.clip(y, lo, hi), color=style.colour, ls=style.line, lw=0.8 if faint else 1.4,
                 marker="" if faint else style.marker, ms=4, markevery=(i % every, every),
                 alpha=0.45 if faint else 1.0, zorder=1 if faint else 3,
-                label=f"{name}{' (unstable loop: clipped)' if left else ''}")
+                label=f"{name}{f' ({clipped_note})' if left else ''}")
     for name in failed:
         style = look(name)
         ax.plot([], [], color=style.colour, ls=style.line, marker=style.marker, ms=4, alpha=0.45,
@@ -79,7 +81,7 @@ def _panel(ax, runs: dict[str, Trace], panel: Panel, onset: int | None, title: s
                     color="grey")
     ax.set_ylim(lo, hi)
     if xlabel:
-        ax.set_xlabel("sample k (h = 1 s)")
+        ax.set_xlabel(f"sample k (h = {h:g} s)")
     ax.set_ylabel(panel.ylabel)
     ax.set_title(title)
     ax.grid(alpha=0.3)
@@ -91,11 +93,14 @@ def _panel(ax, runs: dict[str, Trace], panel: Panel, onset: int | None, title: s
 
 def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subtitle: str,
                   unstable: frozenset[str] = frozenset(), q_caption: str = "", q_steady: float | None = None,
-                  failed: tuple[str, ...] = ()) -> list[Path]:
+                  failed: tuple[str, ...] = (), h: float = 1.0, paper: bool = True,
+                  clipped_note: str = "unstable loop: clipped") -> list[Path]:
     """Write fig3_fault_estimate.png, fig4_alpha.png, fig5_q.png and an overview; return their paths.
 
     ``q_caption`` and ``q_steady`` (``monitor.demo.steady.q_caption``) explain Fig. 5's pitch-rate offset;
     ``failed`` names designs that have no run, listed in the legend as such. ``runs`` must not be empty.
+    ``paper`` False drops the paper's figure numbers from the titles (the aircraft demo is not in the paper);
+    ``clipped_note`` is what the legend says of a faint run whose curve leaves the axes.
     """
     import matplotlib
 
@@ -110,17 +115,22 @@ def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subt
               reference=q_steady,
               reference_label="" if q_steady is None else f"model: q with alpha held at 0 ({q_steady:.2f})"),
     ]
+    if not paper:
+        panels = [Panel(p.file, p.field, p.ylabel, p.title.partition(": ")[2], p.truth, p.caption, p.reference,
+                        p.reference_label) for p in panels]
     paths = []
     for panel in panels:
         fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
-        _panel(ax, runs, panel, onset, f"{panel.title}\n{subtitle}", unstable, failed=failed)
+        _panel(ax, runs, panel, onset, f"{panel.title}\n{subtitle}", unstable, failed=failed, h=h,
+               clipped_note=clipped_note)
         path = out_dir / panel.file
         fig.savefig(path, bbox_inches="tight")
         plt.close(fig)
         paths.append(path)
     fig, axes = plt.subplots(len(panels), 1, figsize=(10, 10), dpi=100, sharex=True)
     for i, (ax, panel) in enumerate(zip(axes, panels)):
-        _panel(ax, runs, panel, onset, panel.title, unstable, xlabel=i == len(panels) - 1, failed=failed)
+        _panel(ax, runs, panel, onset, panel.title, unstable, xlabel=i == len(panels) - 1, failed=failed, h=h,
+               clipped_note=clipped_note)
     fig.suptitle(subtitle, fontsize=9)
     fig.tight_layout()
     path = out_dir / "overview.png"
@@ -128,3 +138,42 @@ def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subt
     plt.close(fig)
     paths.append(path)
     return paths
+
+
+def write_identification_figure(runs: dict[str, dict[str, np.ndarray]], names: dict[str, tuple[str, ...]],
+                                fits: dict[str, dict[str, float]], path: Path, subtitle: str) -> Path:
+    """The held-out free runs of each identified model against the flight: one panel per state.
+
+    ``runs`` maps a model's name to its ``validation_run`` (``t``, ``y`` measured, ``y_hat`` simulated from the
+    first held-out sample with the flown elevator alone); ``names`` to its states; ``fits`` to fit % per state.
+    Why the free run and not one-step predictions: a monitor runs its model for minutes, and a one-step error
+    hides the slow modes a short-period model leaves out.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    states = list(dict.fromkeys(s for model in names.values() for s in model))
+    fig, axes = plt.subplots(len(states), 1, figsize=(10, 2.4 * len(states)), dpi=100, sharex=True, squeeze=False)
+    for ax, state in zip(axes[:, 0], states):
+        drawn = False
+        for i, (model, run) in enumerate(runs.items()):
+            if state not in names[model]:
+                continue
+            j = names[model].index(state)
+            if not drawn:
+                ax.plot(run["t"], run["y"][:, j], color="black", lw=1.6, label="flight (held out)")
+                drawn = True
+            style = look(model)
+            ax.plot(run["t"], run["y_hat"][:, j], color=style.colour, ls=style.line, lw=1.2,
+                    label=f"{model} model, fit {fits[model][state]:.1f} %")
+        ax.set_ylabel(f"{state} (deviation)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    axes[-1, 0].set_xlabel("time in the flight (s)")
+    fig.suptitle(f"Identified models, free run over held-out data\n{subtitle}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, bbox_inches="tight")
+    plt.close(fig)
+    return path

@@ -25,12 +25,34 @@ from typing import Callable
 from monitor.errors import UserError
 from monitor.process import stop_process_group, udp_port_taken
 
-__all__ = ["Scenario", "LiveRun", "run_live", "free_port"]
+__all__ = ["Aircraft", "Scenario", "LiveRun", "Daemon", "run_live", "free_port"]
+
+
+@dataclass(frozen=True)
+class Aircraft:
+    """A JSBSim aircraft for ``sim-vehicle run --aircraft`` and its flight condition."""
+
+    name: str = "c172p"
+    airspeed: float = 100.0  # kt
+    altitude: float = 3000.0  # ft
+    rate: float = 20.0  # Hz: h = 1 / rate
+    turbulence: str = "none"
+    aircraft_dir: str | None = None
+
+    def vehicle_args(self) -> list[str]:
+        """sim-vehicle's flags that fly this aircraft at this condition."""
+        args = ["--aircraft", self.name, "--airspeed", f"{self.airspeed:g}", "--altitude", f"{self.altitude:g}",
+                "--rate", f"{self.rate:g}", "--turbulence", self.turbulence]
+        return args + (["--aircraft-dir", self.aircraft_dir] if self.aircraft_dir else [])
 
 
 @dataclass(frozen=True)
 class Scenario:
-    """What every design is run against (the paper's, by default)."""
+    """What every design is run against (the paper's, by default).
+
+    With ``aircraft`` the vehicle flies that JSBSim aircraft (``wind`` does not apply: its air is the
+    aircraft's ``turbulence``) and ``plant`` is only the monitor's model of it.
+    """
 
     plant: str = "paper-continuous"
     steps: int = 100
@@ -40,6 +62,18 @@ class Scenario:
     wind: str = "paper"
     seed: int = 0
     sysid: int = 1
+    aircraft: Aircraft | None = None
+
+    def vehicle_args(self) -> list[str]:
+        """sim-vehicle's flags for the vehicle flown: the aircraft, or the plant and its wind."""
+        if self.aircraft is not None:
+            return self.aircraft.vehicle_args()
+        return ["--plant", self.plant, "--wind", self.wind]
+
+    def wall_budget(self) -> float:
+        """Seconds the vehicle may take to fly ``steps`` at ``speedup``, with room for start-up (the paper's h is 1 s)."""
+        h = 1.0 / self.aircraft.rate if self.aircraft is not None else 1.0
+        return self.steps * h / self.speedup + 30.0
 
 
 @dataclass
@@ -73,7 +107,7 @@ def _wait(predicate: Callable[[], bool], timeout: float, what: str, proc: subpro
     raise UserError(f"timed out after {timeout:.0f} s waiting for {what}")
 
 
-class _Daemon:
+class Daemon:
     """A console entry point run with this interpreter, in its own process group, always stopped."""
 
     def __init__(self, module: str, args: list[str], log: Path) -> None:
@@ -90,7 +124,8 @@ class _Daemon:
 
 
 def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progress: Callable[[str], None]) -> LiveRun:
-    """Run one design live and return what the demo's subscriber saw (the recording is in ``out_dir``)."""
+    """Run one design live and return what the demo's subscriber saw (the recording is ``out_dir/<method>.rrd``;
+    ``method`` is the run's label, which names its files)."""
     import zenoh
 
     from monitor.wire.zenoh_session import build_config, close_quietly, open_session
@@ -123,20 +158,20 @@ def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progre
     t0 = time.monotonic()
     try:
         name = f"demo-{method}-{os.getpid()}"
-        monitor = _Daemon("monitor", ["--log-level", "INFO", "run", "--plant", scenario.plant, "--gains", str(gains),
+        monitor = Daemon("monitor", ["--log-level", "INFO", "run", "--plant", scenario.plant, "--gains", str(gains),
                                       "--mavlink", f"udpin:127.0.0.1:{uport}", "--zenoh-connect", endpoint, "--zenoh-mode", "client",
                                       "--rrd", str(run.rrd), "--name", name], run.log_dir / f"{method}-monitor.log")
         token = f"uav/monitor/{name}"
         _wait(lambda: any(True for _ in session.liveliness().get(token, timeout=0.2)), 60, f"monitor '{name}' on Zenoh",
               monitor.proc, monitor.log)
         _wait(lambda: udp_port_taken(uport), 20, f"monitor UDP port {uport}", monitor.proc, monitor.log)
-        sim = _Daemon("sim_vehicle", ["run", "--plant", scenario.plant, "--mavlink", f"udpout:127.0.0.1:{uport}",
+        sim = Daemon("sim_vehicle", ["run", *scenario.vehicle_args(), "--mavlink", f"udpout:127.0.0.1:{uport}",
                                       "--sysid", str(scenario.sysid), "--steps", str(scenario.steps),
                                       "--speedup", str(scenario.speedup), "--fault", scenario.fault,
-                                      "--delay", scenario.delay, "--wind", scenario.wind, "--seed", str(scenario.seed),
+                                      "--delay", scenario.delay, "--seed", str(scenario.seed),
                                       "--zenoh-connect", endpoint, "--zenoh-mode", "client", "--log-level", "INFO"],
                       run.log_dir / f"{method}-sim.log")
-        budget = scenario.steps / scenario.speedup + 30.0
+        budget = scenario.wall_budget()
         deadline = time.monotonic() + budget
         while sim.proc.poll() is None:
             if time.monotonic() > deadline:

@@ -31,8 +31,8 @@ if TYPE_CHECKING:
     from monitor.gains import GainsFile
     from monitor.model.plant import Plant
 
-__all__ = ["PRIMARY", "DemoOptions", "Designed", "FailedDesign", "Flown", "run_demo", "fly_live", "report_live",
-           "conclude"]
+__all__ = ["PRIMARY", "DemoOptions", "Designed", "FailedDesign", "Flown", "Progress", "run_demo", "design_all",
+           "default_design", "fly_live", "report_live", "conclude", "json_default"]
 
 PRIMARY = "certified"  # the project's own design: the demo fails when (and only when) this one cannot be designed
 
@@ -90,7 +90,7 @@ class Flown:
 Fly = Callable[[Designed, Scenario, Path, Callable[..., None]], Flown]
 
 
-class _Progress:
+class Progress:
     """One status line on stderr, rewritten in place on a terminal, plain lines (throttled) otherwise."""
 
     def __init__(self) -> None:
@@ -122,7 +122,7 @@ def _cached_gains(method: str, plant: Plant, path: Path) -> GainsFile | None:
     return cached if current else None
 
 
-def _gains_for(method: str, plant: Plant, path: Path, redesign: bool, progress: _Progress,
+def _gains_for(method: str, plant: Plant, path: Path, redesign: bool, progress: Progress,
                design: DesignFn) -> GainsFile | FailedDesign:
     """Load the cached gains or design and write them; a design that raises a ``UserError`` is a ``FailedDesign``.
 
@@ -148,7 +148,7 @@ def _gains_for(method: str, plant: Plant, path: Path, redesign: bool, progress: 
     return read_gains(path)
 
 
-def _verified(method: str, gf: GainsFile, plant: Plant, progress: _Progress) -> Designed:
+def _verified(method: str, gf: GainsFile, plant: Plant, progress: Progress) -> Designed:
     """``verify``'s verdict on one design's gains, re-checking its certificate when the file carries one."""
     from monitor.checks.verify import verify_gains
 
@@ -159,19 +159,17 @@ def _verified(method: str, gf: GainsFile, plant: Plant, progress: _Progress) -> 
     return Designed(method, gf, v.stable, certificate)
 
 
-def _design_all(opt: DemoOptions, plant: Plant, progress: _Progress,
-                design: DesignFn) -> tuple[dict[str, Designed], dict[str, FailedDesign]]:
-    """Every requested design, verified, and the ones that could not be designed; both in ``opt.methods``' order."""
-    gains_dir = Path(opt.out) / "gains"
+def design_all(methods: tuple[str, ...], plant: Plant, gains_dir: Path, redesign: bool, progress: Progress,
+               design: DesignFn) -> tuple[dict[str, Designed], dict[str, FailedDesign]]:
+    """Every requested design, verified, and the ones that could not be designed; both in ``methods``' order."""
     gains_dir.mkdir(parents=True, exist_ok=True)
-    outcomes = {m: _gains_for(m, plant, gains_dir / f"{m}.toml", opt.redesign, progress, design)
-                for m in opt.methods}
+    outcomes = {m: _gains_for(m, plant, gains_dir / f"{m}.toml", redesign, progress, design) for m in methods}
     failed = {m: o for m, o in outcomes.items() if isinstance(o, FailedDesign)}
     designed = {m: _verified(m, o, plant, progress) for m, o in outcomes.items() if not isinstance(o, FailedDesign)}
     return designed, failed
 
 
-def _default_design(method: str, plant: Plant) -> DesignResult:
+def default_design(method: str, plant: Plant) -> DesignResult:
     """``run_design``, imported only when a design is needed (cvxpy's import costs about a second)."""
     from monitor.design import run_design
 
@@ -188,14 +186,15 @@ def run_demo(options: DemoOptions, design: DesignFn | None = None, fly: Fly | No
     from monitor.wire.specs import parse_delay_spec, parse_fault_spec
 
     t0 = time.monotonic()
-    progress = _Progress()
+    progress = Progress()
     scenario = options.scenario
     plant = load_plant(scenario.plant)
     if plant.continuous is None:
         raise UserError(f"the demo flies a continuous plant; '{scenario.plant}' is discrete (try paper-continuous)")
     parse_fault_spec(scenario.fault)  # fail early on a bad SPEC, before any design or daemon starts
     parse_delay_spec(scenario.delay, scenario.seed)
-    designed, failed = _design_all(options, plant, progress, design or _default_design)
+    designed, failed = design_all(options.methods, plant, Path(options.out) / "gains", options.redesign, progress,
+                                  design or default_design)
     if options.runs:
         _monte_carlo(options, plant, designed, failed, progress, t0)
     else:
@@ -275,7 +274,7 @@ def report_live(opt: DemoOptions, plant: Plant, flown: dict[str, Flown], failed:
     summary = {"mode": "live", "options": asdict(opt), "rows": [asdict(r) for r in rows], "runs": runs,
                "figures": figures,
                "wall_seconds": round(time.monotonic() - t0, 2)}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=json_default))
     print(f"Summary:    {out / 'summary.json'}  (total {summary['wall_seconds']:.1f} s)")
     return summary
 
@@ -327,7 +326,7 @@ def _mc_line(method: str, r: dict, runs: int) -> str:
 
 
 def _monte_carlo(opt: DemoOptions, plant: Plant, designed: dict[str, Designed], failed: dict[str, FailedDesign],
-                 progress: _Progress, t0: float) -> None:
+                 progress: Progress, t0: float) -> None:
     """The simulation-only comparison over delay seeds, written to montecarlo.json (summary.json is left alone)."""
     sc = opt.scenario
     results = {}
@@ -348,13 +347,13 @@ def _monte_carlo(opt: DemoOptions, plant: Plant, designed: dict[str, Designed], 
     out = Path(opt.out)
     summary = {"mode": "monte-carlo", "options": asdict(opt), "results": results,
                "wall_seconds": round(time.monotonic() - t0, 2)}
-    (out / "montecarlo.json").write_text(json.dumps(summary, indent=2, default=_json_default))
+    (out / "montecarlo.json").write_text(json.dumps(summary, indent=2, default=json_default))
     for line in _failed_lines(failed):
         print(line)
     print(f"\nResults: {out / 'montecarlo.json'} (the live run's summary.json, if any, is untouched)")
 
 
-def _json_default(value):
+def json_default(value):
     if isinstance(value, (np.integer,)):
         return int(value)
     if isinstance(value, (np.floating,)):

@@ -11,7 +11,7 @@ import numpy as np
 from monitor.checks import metrics
 from monitor.demo.montecarlo import Trace
 
-__all__ = ["Row", "trace_from_recording", "row_from_recording", "format_table", "SETTLING_FLOOR"]
+__all__ = ["Row", "trace_from_recording", "row_from_recording", "late_window", "format_table", "SETTLING_FLOOR"]
 
 SETTLING_FLOOR = 2  # a floor: f(20) first reaches y(21), so no observer of form (5) settles before onset + 2
 
@@ -38,11 +38,15 @@ class Row:
     false_alarms: int | None
     tau_true_p50: float | None = None
     failure: str | None = None  # why this design has no run ("design failed: ..."); None when it ran
+    model: str | None = None  # the aircraft demo: which identified model the design was made for
+    ef_late: float | None = None  # the aircraft demo: mean |e_f| over the second ending LATE_S after onset
+    alpha_late: float | None = None  # ... and the mean alpha deviation from trim over that second (the alpha hold)
 
     @classmethod
-    def failed(cls, method: str, failure: str) -> Row:
+    def failed(cls, method: str, failure: str, model: str | None = None) -> Row:
         """The row of a design that never ran: its name and why, every measurement None."""
-        return cls(method, None, None, None, None, None, None, None, None, None, None, None, failure=failure)
+        return cls(method, None, None, None, None, None, None, None, None, None, None, None, failure=failure,
+                   model=model)
 
 
 def trace_from_recording(rrd: Path, fault_spec: str) -> tuple[Trace, dict]:
@@ -70,8 +74,12 @@ def trace_from_recording(rrd: Path, fault_spec: str) -> tuple[Trace, dict]:
 
 
 def row_from_recording(method: str, rrd: Path, fault_spec: str, stable: bool, certificate: str,
-                       gamma_e: float, gamma_z: float) -> tuple[Row, Trace]:
+                       gamma_e: float, gamma_z: float, trim: tuple[float, float] = (0.0, 0.0)) -> tuple[Row, Trace]:
+    """One design's row and trace from its recording; ``trim`` (alpha0, q0) is subtracted from the measured
+    alpha and q, which the recording keeps as measured (absolute), so that an aircraft's row reads deviations."""
     trace, report = trace_from_recording(rrd, fault_spec)
+    trace.alpha = trace.alpha - trim[0]
+    trace.q = trace.q - trim[1]
     onset = report.get("onset_k")
     after = trace.k >= onset if onset is not None else np.zeros(trace.k.size, bool)
     tau = report.get("tau_true_s") or {}
@@ -85,6 +93,22 @@ def row_from_recording(method: str, rrd: Path, fault_spec: str, stable: bool, ce
     ), trace
 
 
+def late_window(trace: Trace, onset: int | None, rate: float, late_s: float = 30.0) -> tuple[float | None, float | None]:
+    """``(mean |e_f|, mean alpha)`` over the second that ends ``late_s`` after onset; None when the run is shorter.
+
+    Why a late window and not the RMS after onset: a model that leaves out the phugoid estimates the fault
+    well at first and loses it as the aircraft drifts off trim; the drift shows tens of seconds later.
+    """
+    if onset is None:
+        return None, None
+    end = onset + round(late_s * rate)
+    window = (trace.k > end - round(rate)) & (trace.k <= end)
+    if not window.any() or trace.k.max() < end:
+        return None, None
+    ef = np.abs(trace.f_hat[window] - trace.f[window])
+    return float(np.mean(ef)), float(np.mean(trace.alpha[window]))
+
+
 def _fmt(value, spec: str = ".3f", none: str = "never") -> str:
     if value is None:
         return none
@@ -93,22 +117,28 @@ def _fmt(value, spec: str = ".3f", none: str = "never") -> str:
     return format(value, spec)
 
 
-def _cells(r: Row) -> list[str]:
-    """A row's cells; a failed design has two, its name and why, the reason running on over the empty columns."""
+def _cells(r: Row, aircraft: bool) -> list[str]:
+    """A row's cells; a failed design has its name (and model) and why, the reason running on over the empty columns."""
+    first = [r.model or "", r.method] if aircraft else [r.method]
     if r.failure is not None:
-        return [r.method, r.failure]
-    return [r.method, "stable" if r.stable else "UNSTABLE", r.certificate, _fmt(r.gamma_e), _fmt(r.gamma_z),
-            str(r.samples), _fmt(r.settling_steps, "d"), _fmt(r.rms_ef, ".3g"), _fmt(r.peak_alpha_after, ".3g"),
+        return [*first, r.failure]
+    late = [_fmt(r.ef_late, ".3g", "-"), _fmt(r.alpha_late, ".3g", "-")] if aircraft else []
+    return [*first, "stable" if r.stable else "UNSTABLE", r.certificate, _fmt(r.gamma_e), _fmt(r.gamma_z),
+            str(r.samples), _fmt(r.settling_steps, "d"), _fmt(r.rms_ef, ".3g"), *late, _fmt(r.peak_alpha_after, ".3g"),
             _fmt(r.rms_alpha_after, ".3g"), _fmt(r.alarm_delay, "d"), str(r.false_alarms)]
 
 
-def format_table(rows: list[Row]) -> str:
-    head = ["design", "real loop", "certificate", "gamma_e", "gamma_z", "samples",
-            f"FE settling, samples (floor {SETTLING_FLOOR})", "RMS e_f after onset", "peak |alpha| after, deg", "RMS alpha after, deg",
-            "alarm delay, samples", "false alarms"]
-    body = [_cells(r) for r in rows]
+def format_table(rows: list[Row], late_s: float = 30.0) -> str:
+    """The comparison; rows with a ``model`` (the aircraft demo) add it and the late-window columns."""
+    aircraft = any(r.model for r in rows)
+    late = [f"|e_f| {late_s:g} s after, deg", f"alpha {late_s:g} s after, deg"] if aircraft else []
+    head = [*(["model"] if aircraft else []), "design", "real loop", "certificate", "gamma_e", "gamma_z", "samples",
+            f"FE settling, samples (floor {SETTLING_FLOOR})", "RMS e_f after onset", *late, "peak |alpha| after, deg",
+            "RMS alpha after, deg", "alarm delay, samples", "false alarms"]
+    body = [_cells(r, aircraft) for r in rows]
     # a failed row's reason spans the measurement columns, so it widens none of them (only its name counts)
-    widths = [max([len(h), *(len(b[i]) for b in body if len(b) == len(head) or i == 0)])
+    named = 2 if aircraft else 1
+    widths = [max([len(h), *(len(b[i]) for b in body if len(b) == len(head) or i < named)])
               for i, h in enumerate(head)]
     line = lambda cells: "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()  # noqa: E731
     return "\n".join([line(head), line(["-" * w for w in widths]), *(line(b) for b in body)])

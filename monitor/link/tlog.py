@@ -75,6 +75,20 @@ class TlogWriter:
     def write(self, t_us: int, frame: bytes) -> None:
         self._fh.write(_STAMP.pack(t_us) + frame)
 
+    def write_datagram(self, t_us: int, data: bytes) -> int:
+        """One record per frame of a datagram (a vehicle may pack several), as a ground station logs messages.
+
+        Bytes that do not start a whole frame are written as one record of their own, so nothing received is
+        dropped; the reader skips them and counts them. Returns the number of records written.
+        """
+        i, n, records = 0, len(data), 0
+        while i < n:
+            length = _frame_length(data, i, n)
+            end = i + length if length is not None and i + length <= n else n
+            self.write(t_us, data[i:end])
+            i, records = end, records + 1
+        return records
+
     def close(self) -> None:
         self._fh.close()
 
