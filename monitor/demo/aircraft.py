@@ -30,6 +30,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
+import numpy as np
+
 from monitor.demo.live import Aircraft, Scenario, Daemon
 from monitor.demo.methods import METHODS
 from monitor.errors import UserError
@@ -272,6 +274,14 @@ def _report(opt: AircraftDemoOptions, identified: dict[str, _Identified], runs: 
     print(f"Summary:    {out / 'summary.json'}  (total {summary['wall_seconds']:.1f} s)")
 
 
+def _lost(flown: Flown) -> bool:
+    """A run drawn faint, as an unstable one: unstable on the model, or stable there but with an estimate
+    error on the aircraft larger than the fault itself. Its excursions would otherwise set the axes and
+    flatten every curve that follows the fault."""
+    row, fault = flown.row, float(np.max(np.abs(flown.trace.f))) if flown.trace.f.size else 0.0
+    return not row.stable or row.rms_ef is None or not row.rms_ef <= max(fault, 1e-9)
+
+
 def _figures(opt: AircraftDemoOptions, identified: dict[str, _Identified], runs: dict[str, _ModelRuns],
              subtitle: str) -> list[str]:
     from monitor.demo.figures import write_figures, write_identification_figure
@@ -289,10 +299,8 @@ def _figures(opt: AircraftDemoOptions, identified: dict[str, _Identified], runs:
             continue
         d = out / model
         d.mkdir(parents=True, exist_ok=True)
-        # a loop that is stable on the model but never settles on the aircraft is drawn faint, as an unstable one:
-        # its excursions would otherwise set the axes and flatten every curve that did settle
-        faint = frozenset(m for m, f in r.flown.items() if not f.row.stable or f.row.settling_steps is None)
+        faint = frozenset(m for m, f in r.flown.items() if _lost(f))
         paths += write_figures({m: f.trace for m, f in r.flown.items()}, onset, d, f"{model} model; {subtitle}",
                                faint, failed=tuple(r.failed), h=h, paper=False,
-                               clipped_note="did not settle on the aircraft: clipped")
+                               clipped_note="lost on the aircraft: clipped")
     return [str(p) for p in paths]

@@ -61,7 +61,8 @@ def _panel(ax, runs: dict[str, Trace], panel: Panel, onset: int | None, title: s
         ax.axhline(panel.reference, color="black", ls=(0, (1, 3)), lw=1.2, zorder=2, label=panel.reference_label)
         series.append(np.array([panel.reference]))
     lo, hi = _limits(series, 0.5)
-    every = max(3, len(runs))  # one design's marker per sample: coincident curves show every design's marks
+    # one design's marker per sample (coincident curves show every design's marks), thinned on long runs
+    every = max(3, len(runs), max(len(t.k) for t in runs.values()) // 80)
     for i, (name, t) in enumerate(runs.items()):
         y = getattr(t, panel.field)
         left = bool(np.any(~np.isfinite(y)) or np.any((y < lo) | (y > hi)))
