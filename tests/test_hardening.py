@@ -100,6 +100,9 @@ class _DatagramLink:
         self.encoder = FrameEncoder(255, 191)
         self.sent: list[bytes] = []
 
+    def encoder_for(self, peer) -> FrameEncoder:
+        return self.encoder
+
     def send(self, data: bytes, peer) -> None:
         self.sent.append(data)
 

@@ -35,10 +35,95 @@ def _reference(frames_bytes: list[bytes]) -> list[tuple]:
     codec = new_codec(255, 1)
     out = []
     for msg in codec.parse_buffer(b"".join(frames_bytes)) or []:
+        assert msg.get_type() != "BAD_DATA", msg
         layout = layout_by_name(msg.get_type())
-        out.append((msg.get_msgId(), msg.get_srcSystem(), msg.get_srcComponent(),
-                    layout.decode(msg.get_msgbuf()[10:-2])))
+        buf = msg.get_msgbuf()
+        header = 6 if buf[0] == 0xFE else 10
+        decoded = layout.decode(buf[header:-2])
+        # pymavlink's own values, in the layout's flat wire order: the payload slice is not trusted alone
+        flat = []
+        for name in layout.fields:
+            value = getattr(msg, name)
+            flat.extend(value if isinstance(value, list) else [value])
+        assert [v.rstrip(b"\x00").decode() if isinstance(v, bytes) else v for v in decoded] == flat
+        out.append((msg.get_msgId(), msg.get_srcSystem(), msg.get_srcComponent(), decoded))
     return out
+
+
+class _Sink:
+    def __init__(self) -> None:
+        self.buffer = bytearray()
+
+    def write(self, data: bytes) -> None:
+        self.buffer += data
+
+    def take(self) -> bytes:
+        out = bytes(self.buffer)
+        self.buffer.clear()
+        return out
+
+
+def _v1_codec(sysid: int, compid: int = 1):
+    """pymavlink's MAVLink 1 encoder (its v1 dialect module: base fields only, no truncation, no signing)."""
+    from pymavlink.dialects.v10 import ardupilotmega as v1
+
+    return v1, v1.MAVLink(_Sink(), srcSystem=sysid, srcComponent=compid)
+
+
+def _telemetry_v1(k: int, sysid: int = 4) -> list[bytes]:
+    """What an ArduPilot vehicle on a MAVLink 1 link sends: messages with ids below 256, one with extensions
+    (SERVO_OUTPUT_RAW, STATUSTEXT), zeros at the end of the payload (which v1 keeps), encoded by pymavlink."""
+    v1, codec = _v1_codec(sysid)
+    t_us = 123_456_789 + k * 20_000
+    msgs = [v1.MAVLink_attitude_message(t_us // 1000, 0.1, -0.02 * k, 0.3, 0.0, 0.05 * k, 0.0),
+            v1.MAVLink_servo_output_raw_message(t_us & 0xFFFFFFFF, 0, 1500, 1500 + 10 * k, 1000, 0, 0, 0, 0, 0),
+            v1.MAVLink_heartbeat_message(1, 3, 0, 0, 4, 3),
+            v1.MAVLink_statustext_message(6, b"v1 text %d" % k),
+            v1.MAVLink_named_value_float_message(k, b"X", 0.0)]
+    return [m.pack(codec) for m in msgs]
+
+
+def test_mavlink1_frames_give_pymavlink_values_packed_or_one_each() -> None:
+    frames = [f for k in range(4) for f in _telemetry_v1(k)]
+    assert all(f[0] == 0xFE for f in frames)
+    expected = _reference(frames)
+    assert len(expected) == 20
+    counters = FrameCounters()
+    parser = FrameParser(counters)
+    assert _decoded(parser.feed(b"".join(frames))) == expected
+    assert parser.version == 1
+    assert _decoded([f for data in frames for f in parser.feed(data)]) == expected
+    assert counters.frames == counters.frames_v1 == 40
+    assert counters.garbage == counters.truncated == counters.wrong_dialect == 0
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_mavlink1_and_2_mixed_on_a_stream_split_anywhere(seed: int) -> None:
+    vehicle = new_codec(3, 1)
+    data = b"".join(f for k in range(10) for f in (*_telemetry(vehicle, k), *_telemetry_v1(k, sysid=5)))
+    rng = random.Random(seed)
+    cuts = sorted(rng.sample(range(1, len(data)), 150))
+    pieces = [data[a:b] for a, b in zip([0, *cuts], [*cuts, len(data)])]
+    c = FrameCounters()
+    parser = FrameParser(c, stream=True)
+    got = [f for piece in pieces for f in parser.feed(piece)]
+    assert _decoded(got) == _reference([data])
+    assert c.frames == 80 and c.frames_v1 == 50 and c.garbage == 0
+
+
+def test_a_signed_link_refuses_mavlink1_frames() -> None:
+    vehicle = new_codec(2, 1)
+    vehicle.signing.secret_key, vehicle.signing.sign_outgoing = KEY, True
+    from monitor.wire.mavlink import bump_signing_clock
+
+    bump_signing_clock(vehicle)
+    c = FrameCounters()
+    parser = FrameParser(c, Signer(KEY))
+    assert parser.feed(b"".join(_telemetry_v1(1))) == []
+    assert c.v1_refused == 5 and c.frames == c.frames_v1 == c.bad_signature == c.garbage == 0
+    assert len(parser.feed(b"".join(_telemetry(vehicle, 1)))) == 3 and parser.version == 2
+    with pytest.raises(ValueError, match="cannot be signed"):
+        FrameEncoder(255, 191, Signer(KEY), version=1)
 
 
 def test_datagram_packed_or_one_message_each_gives_pymavlink_values() -> None:
@@ -83,15 +168,6 @@ def test_garbage_bad_crc_truncation_and_other_dialects_are_counted_and_good_fram
     assert c.garbage == 2  # a v1 frame whose CRC fails is junk, not a frame
 
 
-def test_mavlink1_frames_are_counted_as_wrong_dialect() -> None:
-    from pymavlink.dialects.v10 import ardupilotmega as v1
-
-    codec = v1.MAVLink(None, srcSystem=1, srcComponent=1)
-    frame = v1.MAVLink_heartbeat_message(1, 3, 0, 0, 4, 3).pack(codec)
-    c = FrameCounters()
-    assert FrameParser(c).feed(frame) == [] and c.wrong_dialect == 1
-
-
 def _send(codec, msg) -> bytes:
     codec.send(msg)  # send (not pack) advances the sequence number, as a real sender does
     return codec.file.take()
@@ -113,6 +189,29 @@ def test_encoder_matches_pymavlink_byte_for_byte() -> None:
     assert "fault alarm" in msg.text and "sysid 4" in msg.text
     hb = new_codec(1, 1).parse_buffer(heartbeat_frame(enc))[0]
     assert hb.get_type() == "HEARTBEAT" and hb.type == mavlink.MAV_TYPE_ONBOARD_CONTROLLER
+
+
+def test_mavlink1_encoder_matches_pymavlink_v1_byte_for_byte() -> None:
+    v1, ref = _v1_codec(255, 191)
+    enc = FrameEncoder(255, 191, version=1)
+    cmd = default_signal_map().command
+    for k in range(3):
+        controls = [0.0] * 8
+        controls[1] = 12.5 * (k - 1) / 30.0
+        ref.send(v1.MAVLink_set_actuator_control_target_message(k * 20_000, 0, 4, 1, controls))
+        assert command_frame(enc, cmd, 4, k * 20_000, [12.5 * (k - 1)]) == ref.file.take()
+    ref.send(v1.MAVLink_named_value_float_message(40, b"FHAT", 0.0))  # all-zero tail: v1 keeps it
+    assert fhat_frames(enc, 40_000, [0.0]) == ref.file.take()
+    ref.send(v1.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, b"sysid 4 fault alarm raised |fhat| 2.5 deg"))
+    assert alarm_text_frame(enc, 4, "raised", 2.5, "deg") == ref.file.take()  # no extension fields in v1
+    ref.send(v1.MAVLink_heartbeat_message(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0,
+                                          mavlink.MAV_STATE_ACTIVE, 3))
+    assert heartbeat_frame(enc) == ref.file.take()
+    # what v1 cannot carry (an id above 255) goes out in MAVLink 2, and our parser reads both back
+    frame = enc.encode(layout_by_name("AOA_SSA"), (1_000, 2.5, 0.0))
+    assert frame[0] == 0xFD
+    c = FrameCounters()
+    assert [f[0] for f in FrameParser(c).feed(frame)] == [mavlink.MAVLINK_MSG_ID_AOA_SSA] and c.frames_v1 == 0
 
 
 def test_signed_frames_verify_both_ways_and_replays_are_refused_across_peers() -> None:

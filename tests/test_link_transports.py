@@ -103,3 +103,75 @@ def test_a_closed_stdout_pipe_is_a_quiet_exit(tmp_path) -> None:
                           shell=True, executable="/bin/bash", capture_output=True, timeout=60)
     assert proc.stderr == b"", proc.stderr
     assert proc.stdout.strip() == b"2"
+
+
+V1_SIGNALS = """
+[signals]
+instant = "SERVO_OUTPUT_RAW"
+outputs = ["alpha"]
+actuator = ["elevator"]
+[signals.measured]
+alpha = { field = "ATTITUDE.pitch", scale = 57.29577951308232, unit = "deg" }
+elevator = { field = "SERVO_OUTPUT_RAW.servo2_raw", scale = 0.06, offset = -90.0, unit = "deg" }
+"""
+
+
+def _v1_sample(codec, v1, k: int) -> bytes:
+    """One sample from a vehicle that speaks MAVLink 1 (ids below 256 only), as one datagram."""
+    t_us = k * 1_000_000
+    return (v1.MAVLink_attitude_message(t_us // 1000, 0.0, 0.01, 0.0, 0.0, 0.0, 0.0).pack(codec)
+            + v1.MAVLink_servo_output_raw_message(t_us, 0, 1500, 1500, 1500, 0, 0, 0, 0, 0).pack(codec))
+
+
+@pytest.mark.parametrize("signed", [False, True])
+def test_a_mavlink1_peer_is_answered_in_mavlink1_and_a_signed_link_refuses_it(tmp_path, caplog, signed) -> None:
+    """Replies (command, FHAT, heartbeat) go to a v1 peer as v1 frames pymavlink reads; a v2 peer on the same
+    link still gets v2. A signed link refuses v1 (counted, one WARNING, in the summary) and answers nothing."""
+    import logging
+
+    from pymavlink.dialects.v10 import ardupilotmega as v1
+
+    from monitor.link.signing import Signer
+    from monitor.link.transports import open_link
+    from monitor.service.alarm import AlarmConfig
+    from monitor.service.pipeline import Pipeline
+    from monitor.service.vehicles import Fleet, VehicleTable, load_model
+    from monitor.wire.mavlink import mavlink, new_codec
+    from tests.test_service_vehicles import _gains_file
+
+    (tmp_path / "signals.toml").write_text(V1_SIGNALS)
+    model = load_model("paper-continuous", _gains_file(tmp_path / "gains.toml"), signals_file=tmp_path / "signals.toml")
+    pipeline = Pipeline(VehicleTable(Fleet(model), AlarmConfig()))
+    link = open_link(parse_connection("udpin:127.0.0.1:0"), 0, pipeline.on_frames, pipeline.frames,
+                     Signer(bytes(range(32))) if signed else None)
+    sent: list[tuple[bytes, object]] = []
+    link.send = lambda data, peer: sent.append((data, peer))  # type: ignore[method-assign]
+    old_peer, new_peer = ("127.0.0.1", 40001), ("127.0.0.1", 40002)
+    codec = v1.MAVLink(None, srcSystem=3, srcComponent=1)
+    for k in range(3):
+        link.on_datagram(_v1_sample(codec, v1, k), old_peer, 0)
+    if signed:
+        assert sent == [] and pipeline.frames.v1_refused == 6 and pipeline.frames.frames == 0
+        with caplog.at_level(logging.WARNING, logger="monitor.run"):
+            assert pipeline.warn_frames() and not pipeline.warn_frames()
+        assert sum("MAVLink 1 frames refused" in r.message for r in caplog.records) == 1
+        assert "MAVLink 1 refused (signed link) 6" in pipeline.summary()
+        return
+    assert pipeline.table.counters.processed == 3 and pipeline.frames.frames_v1 == 6
+    assert "MAVLink 1 frames 6" in pipeline.summary()
+    link.heartbeat()
+    replies = b"".join(data for data, peer in sent if peer == old_peer)
+    reader = new_codec(255, 1)
+    msgs = reader.parse_buffer(replies)
+    assert [m.get_type() for m in msgs] == ["SET_ACTUATOR_CONTROL_TARGET", "NAMED_VALUE_FLOAT"] * 3 + ["HEARTBEAT"]
+    assert all(m.get_msgbuf()[0] == 0xFE for m in msgs) and [m.get_seq() for m in msgs] == list(range(7))
+    assert [m.time_usec for m in msgs[::2][:3]] == [0, 1_000_000, 2_000_000]
+    # the same vehicle now speaks MAVLink 2 from another port: answered in MAVLink 2
+    sent.clear()
+    v2 = new_codec(3, 1)
+    v2.send(mavlink.MAVLink_attitude_message(3000, 0.0, 0.01, 0.0, 0.0, 0.0, 0.0))
+    v2.send(mavlink.MAVLink_servo_output_raw_message(3_000_000, 0, 1500, 1500, 1500, 0, 0, 0, 0, 0))
+    pipeline.table.restart_silence = 0.0  # let the new port take over at once
+    link.on_datagram(v2.file.take(), new_peer, 0)
+    assert sent and all(data[0] == 0xFD for data, _peer in sent)
+    assert not link.speaks_v1(new_peer) and link.speaks_v1(old_peer)

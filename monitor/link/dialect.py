@@ -16,7 +16,7 @@ from functools import lru_cache
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-__all__ = ["mavlink", "MessageLayout", "layout_by_id", "layout_by_name", "TIME_FIELDS"]
+__all__ = ["mavlink", "MessageLayout", "layout_by_id", "layout_by_name", "mavlink1_length", "TIME_FIELDS"]
 
 # The fields that can stamp a message with its sampling instant, in order of preference, and their unit in us.
 TIME_FIELDS: tuple[tuple[str, int], ...] = (("time_usec", 1), ("time_boot_ms", 1000))
@@ -89,3 +89,19 @@ def layout_by_id(msgid: int) -> MessageLayout | None:
 def layout_by_name(name: str) -> MessageLayout | None:
     cls = _BY_NAME.get(name.upper())
     return layout_by_id(cls.id) if cls is not None else None
+
+
+@lru_cache(maxsize=None)
+def mavlink1_length(msgid: int) -> int | None:
+    """The payload length of ``msgid`` in a MAVLink 1 frame (its base fields; None if v1 cannot carry it).
+
+    Why pymavlink's v1 dialect: a MAVLink 1 payload stops before the extension fields (as the C library
+    and pymavlink's v1 encoder send it), and only the v1 module's structs say where the base fields end.
+    Imported on first use: only a link that answers a MAVLink 1 peer pays for it.
+    """
+    if msgid > 255:
+        return None
+    from pymavlink.dialects.v10 import ardupilotmega as v1
+
+    cls = v1.mavlink_map.get(msgid)
+    return cls.unpacker.size if cls is not None else None

@@ -13,6 +13,16 @@ holds whole frames, so bytes left at its end are a truncated frame: counted and 
 to swallow the start of the next datagram. Junk between frames is skipped to the next start byte
 (counted once per run of junk); a frame with a bad CRC is skipped one byte at a time, because its
 length byte may be junk too.
+
+MAVLink 1 frames (``0xFE len seq sys comp msgid payload crc``; telemetry radios, older firmware, years of
+archived tlogs) are read like MAVLink 2 ones: the one-byte message id, the CRC with the same CRC extra, the
+payload handed out as it came. A v1 payload is never truncated but stops at the message's last base field
+(v1 carries no extension fields); a v2 payload may have lost its trailing zero bytes. Both are shorter than
+the dialect's struct, and ``MessageLayout.decode`` pads both with zeros, which is what pymavlink does.
+MAVLink 1 cannot be signed, so a signed link refuses every v1 frame (counted ``v1_refused``). A v1 frame
+whose message id the dialect does not know has no CRC extra to check: it cannot be told from junk.
+``version`` is the protocol of the last frame handed out: the link answers a peer in the version it
+speaks (``FrameEncoder(version=1)``).
 """
 
 from __future__ import annotations
@@ -20,7 +30,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, fields
 
-from monitor.link.dialect import MessageLayout, layout_by_id, mavlink
+from monitor.link.dialect import MessageLayout, layout_by_id, mavlink, mavlink1_length
 from monitor.link.signing import SIGNATURE_LEN, Signer
 
 __all__ = ["RawFrame", "FrameCounters", "FrameParser", "FrameEncoder", "crc16"]
@@ -51,10 +61,12 @@ class FrameCounters:
     """What arrived that was not a usable frame, by cause."""
 
     frames: int = 0
+    frames_v1: int = 0  # of ``frames``, those in MAVLink 1
     garbage: int = 0  # runs of bytes that are no frame, and frames with a bad CRC
     truncated: int = 0  # datagrams that ended inside a frame
     bad_signature: int = 0  # unsigned, wrongly signed or replayed frames (signed links only)
-    wrong_dialect: int = 0  # message ids unknown to ardupilotmega, and MAVLink 1 frames
+    wrong_dialect: int = 0  # MAVLink 2 message ids unknown to ardupilotmega
+    v1_refused: int = 0  # valid MAVLink 1 frames on a signed link (v1 cannot be signed)
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -63,12 +75,13 @@ class FrameCounters:
 class FrameParser:
     """One byte source's parser: ``feed`` returns the whole, valid frames found so far."""
 
-    __slots__ = ("counters", "signer", "stream", "_buf", "_crc_extra")
+    __slots__ = ("counters", "signer", "stream", "version", "_buf", "_crc_extra")
 
     def __init__(self, counters: FrameCounters, signer: Signer | None = None, stream: bool = False) -> None:
         self.counters = counters
         self.signer = signer
         self.stream = stream
+        self.version = 0  # MAVLink version of the last frame handed out (0: none yet)
         self._buf = b""
         self._crc_extra: dict[int, bytes] = {}
 
@@ -104,7 +117,13 @@ class FrameParser:
                     break
                 extra = self._extra(data[i + 5])
                 if extra is not None and crc16(extra, crc16(data[i + 1 : end - 2])) == data[end - 2] | data[end - 1] << 8:
-                    c.wrong_dialect += 1
+                    if self.signer is not None:
+                        c.v1_refused += 1
+                    else:
+                        c.frames += 1
+                        c.frames_v1 += 1
+                        self.version = 1
+                        out.append((data[i + 5], data[i + 3], data[i + 4], data[i + _HEADER1 : end - 2]))
                     i, in_junk = end, False
                 else:
                     if not in_junk:
@@ -144,6 +163,7 @@ class FrameParser:
                 c.bad_signature += 1
             else:
                 c.frames += 1
+                self.version = 2
                 out.append((msgid, sysid, compid, data[i + _HEADER2 : end - 2]))
             i = total_end
         if i < n:
@@ -155,6 +175,7 @@ class FrameParser:
 
 
 _HEADER_STRUCT = struct.Struct("<BBBBBBBHB")
+_HEADER1_STRUCT = struct.Struct("<BBBBBB")
 _CRC = struct.Struct("<H")
 
 
@@ -162,21 +183,33 @@ class FrameEncoder:
     """The monitor's outgoing frames on one link: its own sequence numbers, signed when a key is set.
 
     Byte-identical to pymavlink's encoder for the same message, sequence and ids (tested), without
-    building pymavlink message objects on the hot path.
+    building pymavlink message objects on the hot path. ``version=1`` writes MAVLink 1 frames for a peer
+    that speaks only v1 (a message whose id is above 255 still goes out in v2: v1 cannot carry it); a
+    signed link never writes v1, which cannot be signed.
     """
 
-    def __init__(self, sysid: int, compid: int, signer: Signer | None = None) -> None:
+    def __init__(self, sysid: int, compid: int, signer: Signer | None = None, version: int = 2) -> None:
+        if version not in (1, 2):
+            raise ValueError(f"MAVLink version must be 1 or 2, got {version}")
+        if version == 1 and signer is not None:
+            raise ValueError("MAVLink 1 frames cannot be signed")
         self.sysid = sysid
         self.compid = compid
         self.signer = signer
+        self.version = version
         self.seq = 0
 
     def encode(self, layout: MessageLayout, values: tuple) -> bytes:
         """A frame of ``layout`` whose payload is ``layout.unpacker.pack(*values)`` (wire order, arrays flat)."""
-        payload = layout.unpacker.pack(*values).rstrip(b"\x00") or b"\x00"  # MAVLink 2 truncation
         msgid = layout.msgid
-        frame = _HEADER_STRUCT.pack(_STX2, len(payload), _SIGNED if self.signer else 0, 0, self.seq, self.sysid,
-                                    self.compid, msgid & 0xFFFF, msgid >> 16) + payload
+        v1_length = mavlink1_length(msgid) if self.version == 1 else None
+        if v1_length is not None:  # MAVLink 1: the base fields, never truncated
+            payload = layout.unpacker.pack(*values)[:v1_length]
+            frame = _HEADER1_STRUCT.pack(_STX1, len(payload), self.seq, self.sysid, self.compid, msgid) + payload
+        else:
+            payload = layout.unpacker.pack(*values).rstrip(b"\x00") or b"\x00"  # MAVLink 2 truncation
+            frame = _HEADER_STRUCT.pack(_STX2, len(payload), _SIGNED if self.signer else 0, 0, self.seq, self.sysid,
+                                        self.compid, msgid & 0xFFFF, msgid >> 16) + payload
         frame += _CRC.pack(crc16(bytes((layout.crc_extra,)), crc16(frame[1:])))
         self.seq = (self.seq + 1) & 0xFF
         if self.signer is not None:

@@ -10,6 +10,11 @@ Each link turns bytes into frames with its own ``FrameParser`` (one per TCP conn
 keeps partial frames; one per UDP link, since a datagram never does) and hands ``(route, frames, t0)`` to
 the pipeline, where ``route = (link, peer)`` is where the answer goes. Nothing here knows the plant.
 
+Which MAVLink version a peer gets: the one it speaks. A peer whose last read held MAVLink 1 frames (a telemetry
+radio, older firmware, ArduPilot's ``SERIALn_PROTOCOL = 1``) is answered with MAVLink 1 frames from the link's
+v1 encoder (``encoder_for``), as ArduPilot itself answers; any MAVLink 2 frame from it switches it back. A
+signed link only ever hears (and writes) signed MAVLink 2.
+
 Why the UDP peer table is an LRU ``OrderedDict``: it is touched on every datagram, so it must be O(1)
 (a flood from many source ports must not cost the real vehicle its samples), and bounded.
 """
@@ -116,11 +121,24 @@ class Link:
         self.counters = counters
         self.signer = signer
         self.encoder = FrameEncoder(MONITOR_SYSID, MONITOR_COMPONENT, signer)
+        self._encoder_v1: FrameEncoder | None = None  # made when a MAVLink 1 peer is first answered
         self.send_errors = 0
         self.local: str = str(spec)
 
     def new_parser(self, stream: bool) -> FrameParser:
         return FrameParser(self.counters, self.signer, stream=stream)
+
+    def speaks_v1(self, peer: object) -> bool:
+        """Whether ``peer`` last spoke MAVLink 1 (it is then answered in MAVLink 1)."""
+        return False
+
+    def encoder_for(self, peer: object) -> FrameEncoder:
+        """The encoder whose frames ``peer`` reads: MAVLink 1 for a v1 peer on an unsigned link, else the link's."""
+        if self.signer is None and self.speaks_v1(peer):
+            if self._encoder_v1 is None:
+                self._encoder_v1 = FrameEncoder(MONITOR_SYSID, MONITOR_COMPONENT, version=1)
+            return self._encoder_v1
+        return self.encoder
 
     def send(self, data: bytes, peer: object) -> None:
         raise NotImplementedError
@@ -130,7 +148,7 @@ class Link:
 
     def heartbeat(self) -> None:
         for peer in self.peers():
-            self.send(heartbeat_frame(self.encoder), peer)
+            self.send(heartbeat_frame(self.encoder_for(peer)), peer)
 
     async def start(self) -> None:
         raise NotImplementedError
@@ -162,6 +180,7 @@ class UdpLink(Link):
         self.peer_timeout = peer_timeout
         self._peers: OrderedDict[object, float] = OrderedDict()
         self.peers_evicted = 0
+        self._v1_peers: set[object] = set()  # peers whose last datagram held MAVLink 1 frames
         self.remote: tuple | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
 
@@ -208,10 +227,17 @@ class UdpLink(Link):
         if addr in peers:
             peers.move_to_end(addr)
         elif len(peers) >= self.max_peers:
-            peers.popitem(last=False)
+            self._v1_peers.discard(peers.popitem(last=False)[0])
             self.peers_evicted += 1
         peers[addr] = time.monotonic()
+        if self.parser.version == 1:
+            self._v1_peers.add(addr)
+        elif self._v1_peers:
+            self._v1_peers.discard(addr)
         _guarded(self.handler, (self, addr), frames, t0)
+
+    def speaks_v1(self, peer: object) -> bool:
+        return peer in self._v1_peers
 
     def peers(self) -> list[object]:
         if self.spec.kind == "udpout":
@@ -337,6 +363,10 @@ class TcpLink(Link):
             await conn.closed
             self.reconnects += 1
             await asyncio.sleep(0.2)
+
+    def speaks_v1(self, peer: object) -> bool:
+        parser = getattr(peer, "parser", None)
+        return parser is not None and parser.version == 1
 
     def peers(self) -> list[object]:
         return list(self.connections)

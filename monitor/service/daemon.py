@@ -2,8 +2,9 @@
 
 The hot path is synchronous inside the links' read callbacks (``Pipeline.on_frames``). Beside it the loop
 runs two timers: every ``poll_s`` (5 ms) samples whose bounded wait for an actuator report ran out are
-processed, and once a second the housekeeping: heartbeats on every link, vehicle expiry, and the WARNING
-for a vehicle whose telemetry never becomes a sample.
+processed, and once a second the housekeeping: heartbeats on every link, vehicle expiry, the WARNING
+for a vehicle whose telemetry never becomes a sample, and the one WARNING when a signed link refuses
+MAVLink 1 frames.
 
 Shutdown (SIGINT/SIGTERM): stop reading, log the summary, drain the Zenoh queue (bounded), close the
 recorder (which flushes and writes the footer; live viewers get a bounded wait), undeclare everything and close the session (bounded),
@@ -144,6 +145,7 @@ async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
                     link.heartbeat()
                 pipeline.table.expire(now)
                 pipeline.table.warn_missing(now)
+                pipeline.warn_frames()
                 _check_recorder(pipeline)
     finally:
         for link in links:

@@ -70,6 +70,7 @@ class Pipeline:
         self.processing_s: deque[float] = deque(maxlen=100_000)
         self.commands_sent = 0
         self.feedback_sent = 0
+        self.warned_v1 = False
         self._wanted: dict[int, tuple[str, MessageLayout]] = {}
         for model in table.fleet.models():
             for name in {model.signals.instant, *(s.message for s in model.signals.measured.values())}:
@@ -129,17 +130,16 @@ class Pipeline:
             # the command first, the ground-station feedback after it, in ONE write: a syscall saved per
             # sample, and MAVLink peers read several frames per datagram as they do on a stream
             link, peer = route
+            enc = link.encoder_for(peer)  # MAVLink 1 for a peer that speaks only v1
             out = b""
             if self.send_commands:
                 # the absolute deflection u0 + u(k) (the estimator's u is a deviation from the operating point)
-                out = command_frame(link.encoder, vehicle.model.signals.command, vehicle.sysid, sample.time_usec,
-                                    p.u_abs)
+                out = command_frame(enc, vehicle.model.signals.command, vehicle.sysid, sample.time_usec, p.u_abs)
                 self.commands_sent += 1
             if self.gcs_feedback:
-                out += fhat_frames(link.encoder, sample.time_usec, r.f_hat)
+                out += fhat_frames(enc, sample.time_usec, r.f_hat)
                 if p.alarm_event is not None:
-                    out += alarm_text_frame(link.encoder, vehicle.sysid, p.alarm_event, p.f_mag,
-                                            vehicle.model.plant.unit)
+                    out += alarm_text_frame(enc, vehicle.sysid, p.alarm_event, p.f_mag, vehicle.model.plant.unit)
                 self.feedback_sent += 1
             if out:
                 link.send(out, peer)
@@ -168,6 +168,16 @@ class Pipeline:
                             alarm=p.vehicle.alarm.raised, run=p.vehicle.run)
 
     # --- housekeeping and reporting -----------------------------------------------------------------
+    def warn_frames(self) -> bool:
+        """One WARNING, the first time a signed link refuses MAVLink 1 frames (they can never be signed, so
+        the vehicle's samples are lost for a setting, not for an attack); the exit summary counts them."""
+        if self.warned_v1 or not self.frames.v1_refused:
+            return False
+        self.warned_v1 = True
+        log.warning("MAVLink 1 frames refused (%d so far): the links are signed (--signing-key) and MAVLink 1 cannot "
+                    "be signed; set the sender to MAVLink 2 (ArduPilot: SERIALn_PROTOCOL = 2)", self.frames.v1_refused)
+        return True
+
     def counts(self) -> dict[str, int]:
         out = {**self.frames.as_dict(), **self.messages.as_dict(), **self.table.assembly_totals(),
                **self.table.counters.as_dict(), "commands": self.commands_sent, "feedback": self.feedback_sent}
@@ -181,9 +191,10 @@ class Pipeline:
         timing = (f"processing p50 {p50 * 1e6:.0f} us, p99 {p99 * 1e6:.0f} us" if p50 is not None
                   else "no processing times")
         order = ("processed", "duplicates", "stale", "incomplete", "held_missing", "late_parts", "waited_out",
-                 "no_report", "not_applied", "rejected_values", "future", "foreign_source", "excess", "garbage",
-                 "truncated", "bad_signature", "wrong_dialect", "foreign", "refused", "skipped", "vehicles_seen",
+                 "no_report", "not_applied", "rejected_values", "future", "foreign_source", "excess", "frames_v1",
+                 "garbage", "truncated", "bad_signature", "v1_refused", "wrong_dialect", "foreign", "refused", "skipped", "vehicles_seen",
                  "restarts", "resets", "commands", "feedback", "published", "publish_drops")
-        names = {"processed": "samples processed", "vehicles_seen": "vehicles"}
+        names = {"processed": "samples processed", "vehicles_seen": "vehicles", "frames_v1": "MAVLink 1 frames",
+                 "v1_refused": "MAVLink 1 refused (signed link)"}
         parts = [f"{names.get(key, key.replace('_', ' '))} {c[key]}" for key in order if key in c]
         return ", ".join(parts) + f"; {timing}"
