@@ -227,6 +227,9 @@ def test_c172p_identified_from_its_log_fits_held_out_data_and_matches_jsbsim_lin
     assert report["samples"]["log"] == 1300
     assert report["samples"]["validation"] == 360  # the last 30 % of the 60 s manoeuvre
     assert report["excitation"]["lead_in_s"] == pytest.approx(5.0)
+    inventory = report["log"]["inventory"]  # what the log holds: 5 messages a sample + a HEARTBEAT a second
+    assert inventory["frames_v2"] == 1300 * 4 + 65 and inventory["frames_v1"] == 0 and inventory["sysids"] == {"1": 5265}
+    assert {m["name"]: m["hz"] for m in inventory["messages"]}["AOA_SSA"] == pytest.approx(20.0, rel=0.01)
 
     lin = c172p_flight["lin"]
     sp_lin, ph_lin = lin["modes"]
@@ -281,6 +284,7 @@ def test_short_period_model_from_the_same_log(c172p_flight) -> None:
     sp_lin = c172p_flight["lin"]["short_period"]
     assert sp.wn == pytest.approx(sp_lin.wn, rel=0.10) and sp.zeta == pytest.approx(sp_lin.zeta, rel=0.10)
     assert "alpha" in stdout and "fit on held-out data" in stdout
+    assert "log holds: 5265 records over 65.0 s, 5265 frames (MAVLink 1: 0, MAVLink 2: 5265)" in stdout
 
 
 def test_validation_is_a_free_run_not_a_one_step_prediction(c172p_flight) -> None:

@@ -80,17 +80,22 @@ def run(args: argparse.Namespace) -> int:
     vehicles: dict[int, VehicleSeries] = {}
     for record in result.records:
         vehicles.setdefault(record.sysid, VehicleSeries(record.sysid)).samples.append(record)
+    inventory = result.inventory
     if not vehicles:
-        c = result.counts
-        raise UserError(f"{args.tlog}: no sample could be assembled from {result.log_records} log records "
-                        f"({c['frames']} frames; the signal map needs {', '.join(model.signals.messages(True))}"
-                        + (f" from sysid {args.sysid}" if args.sysid else "") + ")")
+        from monitor.link.log_inventory import why_no_samples
+
+        sig = model.signals
+        frames = (f"{inventory.frames_v1} MAVLink 1 and {inventory.frames_v2} MAVLink 2 frames over "
+                  f"{inventory.span_s:.1f} s")
+        raise UserError(f"{args.tlog}: no sample could be assembled from {result.log_records} log records ({frames}); "
+                        + why_no_samples(inventory, sig, (*sig.outputs, *sig.actuator), args.sysid, model.plant.h))
     recording = Recording(path=Path(args.rrd or args.tlog), application_id="fault-monitor analyse",
                           properties={**properties, "fault_monitor_version": __version__}, vehicles=vehicles,
                           has_footer=True)
     report = analyse(recording, sysid=args.sysid, fault_spec=args.fault)
     report["log"] = {"records": result.log_records, "skipped_bytes": result.skipped_bytes,
-                     "truncated": result.truncated, "seconds": round(result.seconds, 3), **result.counts}
+                     "truncated": result.truncated, "seconds": round(result.seconds, 3), **result.counts,
+                     "inventory": inventory.as_dict()}
     if args.json:
         print(json.dumps(report))
     else:
@@ -99,4 +104,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"log: {result.log_records} records in {result.seconds:.2f} s; {c['processed']} samples, "
               f"{c['incomplete']} incomplete, {c['garbage']} garbage, {result.skipped_bytes} bytes skipped"
               + (", truncated at the end" if result.truncated else ""))
+        for line in inventory.lines():
+            print(f"log holds: {line}")
     return 0

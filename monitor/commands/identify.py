@@ -126,29 +126,24 @@ def _map_for(table: dict[str, Any], source: str, states: tuple[str, ...]):
     return parse_signals(written, source, len(states), 1), written
 
 
-def _field_of(spec: Any) -> str:
-    return str(spec.get("field") if isinstance(spec, dict) else spec)
+def _missing_signals(flight: FlightLog, sysid: int, smap, states: tuple[str, ...], model: str) -> str | None:
+    """A one-line reason when a signal identify needs never appears for ``sysid`` (None when all are there): the
+    missing signals, and which messages of the log could carry them (``monitor.link.log_inventory``)."""
+    from monitor.link.log_inventory import explain_missing, field_ref
 
-
-def _missing_signals(flight: FlightLog, sysid: int, written: dict[str, Any], states: tuple[str, ...],
-                     model: str) -> str | None:
-    """A one-line reason when a signal identify needs never appears for ``sysid`` (None when all are there)."""
-    seen = flight.seen.get(sysid, {})
-    measured = written["measured"]
-    names = [*states, *written["actuator"]]
-    absent = [n for n in names if _field_of(measured[n]).partition(".")[0] not in seen]
-    if written["instant"] not in seen and not any(_field_of(measured[n]).startswith(written["instant"] + ".")
-                                                  for n in absent):
-        absent.insert(0, f"the instant ({written['instant']})")
-    if not absent:
+    names = (*states, *smap.actuator)
+    line = explain_missing(flight.inventory, smap, names, sysid)
+    if line is None:
         samples = flight.samples.get(sysid, [])
-        absent = [n for n in states if samples and all(not math.isfinite(v.get(n, math.nan)) for _k, v in samples)]
-    if not absent:
-        return None
-    what = ", ".join(n if n.startswith("the instant") else f"{n} ({_field_of(measured[n])})" for n in absent)
-    messages = sorted({_field_of(measured[n]).partition(".")[0] for n in absent if not n.startswith("the instant")})
-    line = f"missing signals: {what}: the log has no {' or '.join(messages) or written['instant']} from sysid {sysid}"
-    if model == "longitudinal" and set(absent) <= {"theta", "airspeed"}:
+        never = [n for n in states if samples and all(not math.isfinite(v.get(n, math.nan)) for _k, v in samples)]
+        if not never:
+            return None
+        line = ("missing signals: " + ", ".join(f"{n} ({field_ref(smap.measured[n])})" for n in never)
+                + f": never a finite value from sysid {sysid}")
+        absent = never
+    else:
+        absent = [n for n in names if smap.measured[n].message not in flight.inventory.names(sysid)]
+    if model == "longitudinal" and absent and set(absent) <= {"theta", "airspeed"}:
         line += "; --model short-period needs only alpha and q"
     return line
 
@@ -188,7 +183,7 @@ class IdentifiedLog:
                 "name": r.name or Path(r.out).stem, "tau_max": self.tau_max, "actuator_limit": r.actuator_limit,
                 **self.result.report(),
                 "log": {"records": f.records, "skipped_bytes": f.skipped_bytes, "truncated": f.truncated,
-                        "seconds": round(self.seconds, 3), **f.counters}}
+                        "seconds": round(self.seconds, 3), **f.counters, "inventory": f.inventory.as_dict()}}
 
 
 def _checked(req: IdentifyRequest) -> None:
@@ -222,9 +217,10 @@ def _periods(req: IdentifyRequest, smap) -> tuple[float, int, float]:
     return h_read, ratio, tau_max
 
 
-def _vehicle(req: IdentifyRequest, flight: FlightLog, written: dict[str, Any]) -> int:
+def _vehicle(req: IdentifyRequest, flight: FlightLog, smap, states: tuple[str, ...]) -> int:
     """The one system id to identify: the one asked for, or the only one with samples (else a one-line error)."""
     from monitor.errors import UserError
+    from monitor.link.log_inventory import explain_missing
 
     with_samples = sorted(s for s, rows in flight.samples.items() if rows)
     if req.sysid is None and len(with_samples) > 1:
@@ -232,9 +228,8 @@ def _vehicle(req: IdentifyRequest, flight: FlightLog, written: dict[str, Any]) -
                         "one with --sysid")
     candidates = [req.sysid] if req.sysid is not None else (with_samples or sorted(flight.seen) or [])
     if not candidates:
-        raise UserError(f"missing signals: {req.log} holds none of the messages the signal map reads "
-                        f"({', '.join(sorted({_field_of(v).partition('.')[0] for v in written['measured'].values()}))}"
-                        f"; {flight.records} records)")
+        why = explain_missing(flight.inventory, smap, (*states, *smap.actuator)) or "no message the signal map reads"
+        raise UserError(f"{req.log} ({flight.records} records): {why}")
     return candidates[0]
 
 
@@ -256,11 +251,16 @@ def identify_log(req: IdentifyRequest, say: Callable[[str], None] = lambda _text
     started = time.perf_counter()
     flight = read_flight(req.log, smap, h_read, req.sysid,
                          progress=lambda f, n: say(f"{f:.0%} of {req.log}, {n} samples"))
-    sysid = _vehicle(req, flight, written)
-    reason = _missing_signals(flight, sysid, written, states, req.model)
+    sysid = _vehicle(req, flight, smap, states)
+    reason = _missing_signals(flight, sysid, smap, states, req.model)
     if reason:
         raise UserError(reason)
     rows = flight.samples.get(sysid, [])
+    if not rows:
+        from monitor.link.log_inventory import why_no_samples
+
+        raise UserError(f"{req.log}: no sample of sysid {sysid} could be assembled: "
+                        + why_no_samples(flight.inventory, smap, (*states, *smap.actuator), sysid, h_read))
     actuator = written["actuator"][0]
     if ratio > 1:
         rows = _decimate(rows, ratio, actuator)
@@ -311,6 +311,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {req.out}: tau in [0, {done.tau_max:g}] s, actuator limit {req.actuator_limit:g} deg "
           f"({'given' if req.actuator_limit != DEFAULT_ACTUATOR_LIMIT else 'default'}); "
           f"{done.flight.records} log records in {done.seconds:.2f} s")
+    for line in done.flight.inventory.lines():
+        print(f"log holds: {line}")
     return 0
 
 

@@ -3,7 +3,8 @@
 Why its own module: ``identify`` (and the aircraft demo, which identifies from the log it recorded) need the
 samples and what the log held, not the observer ``service/offline.py`` runs over them. The chain is the link
 layer's: ``read_tlog`` -> ``FrameParser`` -> the dialect's layouts -> the signal map -> ``SampleAssembler``
-(observe-only: a sample needs its actuator report).
+(observe-only: a sample needs its actuator report). The same pass fills the log's inventory
+(``monitor.link.log_inventory``: what the log holds, for the report and for the error when a signal is missing).
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import math
 import os
 import time
 from collections.abc import Callable
+
+from monitor.link.log_inventory import LogInventory
 
 __all__ = ["FlightLog", "log_spacing", "read_flight"]
 
@@ -29,6 +32,7 @@ class FlightLog:
         self.skipped_bytes = 0
         self.truncated = False
         self.counters: dict[str, int] = {}
+        self.inventory = LogInventory()
 
 
 def log_spacing(path: str, instant: str, sysid: int | None) -> float | None:
@@ -81,9 +85,13 @@ def read_flight(path: str, smap, h: float, sysid: int | None = None,
     def keep(sys_: int, ready) -> None:
         out.samples.setdefault(sys_, []).extend((sample.k, sample.values) for sample in ready)
 
+    add = out.inventory.add_frames
     for t_us, frame in read_tlog(path, stats):
         position += 8 + len(frame)
-        for msgid, sys_, _compid, payload in parser.feed(frame):
+        v1 = counters.frames_v1
+        frames = parser.feed(frame)
+        add(t_us, frames, counters.frames_v1 - v1)
+        for msgid, sys_, _compid, payload in frames:
             entry = wanted.get(msgid)
             if entry is None or (sysid is not None and sys_ != sysid):
                 continue

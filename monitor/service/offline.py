@@ -4,7 +4,8 @@ The same ``FrameParser`` (one per record: a tlog record holds one whole frame), 
 vehicle table and estimator as ``fault-monitor run --observe``; ``now`` and ``wall`` are the log's own
 timestamps, so the assembler's bounded waits and the observed delay mean what they meant in flight.
 Nothing is sent. Samples go to an in-memory list (for the report, which is ``replay``'s) and, with
-``--rrd``, to the same recorder and layout as ``run``.
+``--rrd``, to the same recorder and layout as ``run``. The same pass fills the log's inventory (what it holds:
+``monitor.link.log_inventory``), which the report prints and a log that gives no sample is explained with.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from monitor.link.frames import FrameParser
+from monitor.link.log_inventory import LogInventory
 from monitor.link.tlog import TlogStats, read_tlog
 from monitor.service.alarm import AlarmConfig
 from monitor.service.pipeline import Pipeline
@@ -53,6 +55,7 @@ class LogAnalysis:
     first_t_us: int | None = None
     last_t_us: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    inventory: LogInventory = field(default_factory=LogInventory)
 
 
 def analyse_log(path: str | Path, fleet: Fleet, alarm: AlarmConfig, sysid: int | None = None, recorder=None,
@@ -70,12 +73,16 @@ def analyse_log(path: str | Path, fleet: Fleet, alarm: AlarmConfig, sysid: int |
     position = 0
     feed, on_frames, perf_ns = parser.feed, pipeline.on_frames, time.perf_counter_ns
     commands = 0
+    counters, inventory = pipeline.frames, LogInventory()
+    add = inventory.add_frames
     for t_us, frame in read_tlog(path, stats):
         if first is None:
             first = t_us
         last = t_us
         position += 8 + len(frame)
+        v1 = counters.frames_v1
         frames = feed(frame)
+        add(t_us, frames, counters.frames_v1 - v1)
         if not frames:
             continue
         if frames[0][0] == _COMMAND_ID:
@@ -94,4 +101,4 @@ def analyse_log(path: str | Path, fleet: Fleet, alarm: AlarmConfig, sysid: int |
     if last is not None:
         pipeline.flush(last * 1e-6, last * 1e-6)
     return LogAnalysis(collect.records, pipeline.counts(), stats.records, stats.skipped_bytes, stats.truncated,
-                       time.perf_counter() - start, first, last, {"commands_in_log": commands})
+                       time.perf_counter() - start, first, last, {"commands_in_log": commands}, inventory)
