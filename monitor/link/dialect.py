@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 import re
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field as dc_field
 from functools import lru_cache
 
 os.environ.setdefault("MAVLINK20", "1")
@@ -37,6 +37,12 @@ class MessageLayout:
     offsets: dict[str, int]  # first flat position of each field in the unpacked tuple
     lengths: dict[str, int]  # values per field: N for numeric arrays, 1 for scalars and char arrays
     is_text: dict[str, bool]
+    codes: dict[str, str] = dc_field(default_factory=dict)  # struct code of each field ('I': uint32, 'Q': uint64...)
+
+    def wrap(self, field: str) -> int:
+        """Units after which ``field`` wraps: 2^32 for a 32-bit time field (``time_boot_ms``, SERVO_OUTPUT_RAW's
+        ``time_usec``), 0 for one that does not wrap in practice (64-bit)."""
+        return 1 << 32 if self.codes.get(field) in ("I", "i") else 0
 
     def position(self, field: str, index: int = 0) -> int:
         """Flat position of ``field[index]``; ValueError naming what is wrong."""
@@ -70,14 +76,15 @@ def _build(cls) -> MessageLayout:
     offsets: dict[str, int] = {}
     lengths: dict[str, int] = {}
     is_text: dict[str, bool] = {}
+    codes: dict[str, str] = {}
     flat = 0
     for name, (count, code) in zip(cls.ordered_fieldnames, tokens):
         text = code == "s"
         n = 1 if text else int(count or 1)
-        offsets[name], lengths[name], is_text[name] = flat, n, text
+        offsets[name], lengths[name], is_text[name], codes[name] = flat, n, text, code
         flat += n
     return MessageLayout(cls.id, cls.msgname, cls.crc_extra, cls.unpacker, tuple(cls.ordered_fieldnames), offsets,
-                         lengths, is_text)
+                         lengths, is_text, codes)
 
 
 @lru_cache(maxsize=None)

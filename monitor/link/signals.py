@@ -117,7 +117,8 @@ class SignalMap:
     actuator: tuple[str, ...]
     record: tuple[str, ...]
     command: CommandMap
-    time_fields: dict[str, tuple[int, int]]  # timed message -> (flat position of its time field, us per unit)
+    time_fields: dict[str, tuple[int, int, int]]  # timed message -> (flat position of its time field, us per unit,
+    #                                              units after which it wraps: 2^32 for a 32-bit field, else 0)
     source: str
     operating_point: dict[str, float] | None = None  # plant units, every output and actuator signal (None: zero)
     y0: tuple[float, ...] = ()  # the operating point of the outputs, in the order of ``outputs`` (zeros if none)
@@ -257,7 +258,7 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int) -> SignalMap
             if hold is not None:
                 raise UserError(f"{w}: 'hold' is for a message without a time field; {layout.name} is matched by "
                                 f"its {stamp[0]}")
-            time_fields[layout.name] = (layout.position(stamp[0]), stamp[1])
+            time_fields[layout.name] = (layout.position(stamp[0]), stamp[1], layout.wrap(stamp[0]))
         else:  # no time field (VFR_HUD): a latest value, sample and hold
             hold = DEFAULT_HOLD_S if hold is None else hold
             if isinstance(hold, bool) or not isinstance(hold, (int, float)) or not (math.isfinite(hold) and hold > 0):
@@ -279,7 +280,7 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int) -> SignalMap
     stamp = instant_layout.time_field()
     if stamp is None or stamp[0] != "time_usec":
         raise UserError(f"{where}: the instant message {instant_layout.name} needs a time_usec field")
-    time_fields[instant_layout.name] = (instant_layout.position("time_usec"), 1)
+    time_fields[instant_layout.name] = (instant_layout.position("time_usec"), 1, instant_layout.wrap("time_usec"))
     outs = _names(raw, "outputs", where, measured)
     if len(outs) != outputs:
         raise UserError(f"{where}: 'outputs' names {len(outs)} signal(s) but the plant has {outputs} output(s) (rows of C)")
