@@ -13,9 +13,12 @@ runs once per worker that gets one of the module's tests; spread over two worker
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
+
+from tests.designs import CACHE_ENV
 
 E2E = Path(__file__).parent / "e2e"
 
@@ -25,3 +28,15 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         path = Path(str(item.fspath))
         group = "e2e-daemons" if E2E in path.parents else f"module-{path.stem}"
         item.add_marker(pytest.mark.xdist_group(group))
+
+
+@pytest.fixture(scope="session", autouse=True)
+def shared_design_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """One design cache for the session, shared by the xdist workers (``tests/designs.py``)."""
+    if os.environ.get(CACHE_ENV):
+        return
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base  # pytest-N/, above popen-gwK/
+    folder = shared / "designs"
+    folder.mkdir(exist_ok=True)
+    os.environ[CACHE_ENV] = str(folder)

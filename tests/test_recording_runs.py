@@ -78,7 +78,7 @@ def test_the_daemon_reports_a_failing_recording_in_its_status_and_exit_code(tiny
             wait_for(lambda: "disk full" in monitor.log(), 10, what="the recording error")
             wait_for(lambda: any("recording_error" in p for _, p in bus.query("uav/1/fault/status")), 10,
                      what="recording_error in the status")
-            assert monitor.stop() == 1
+            assert monitor.stop(timeout=30) == 1  # closing a file on a full disk may take the recorder's 10-s wait
             log = monitor.log()
     error_line = next(line for line in log.splitlines() if "disk full" in line)
     assert " ERROR " in error_line and log.index(error_line) < log.index("stopped:")
