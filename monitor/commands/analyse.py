@@ -11,15 +11,17 @@ __all__ = ["register"]
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "analyse", help="observe-only fault estimation over a MAVLink telemetry log (.tlog), offline",
+        "analyse", help="observe-only fault estimation over a flight log (.tlog, or DataFlash .bin/.log), offline",
         description=(
             "Run the observer (eq. 5) over a flight's telemetry log as MAVProxy or QGroundControl write it "
-            "(8-byte big-endian microsecond time + one MAVLink frame per record), with u(k) read from the "
-            "vehicle's actuator report: the same assembler and estimator as 'run --observe'. Prints the report "
-            "of 'fault-monitor replay'; --rrd also writes the recording in the same layout as 'run'."),
+            "(8-byte big-endian microsecond time + one MAVLink 1 or 2 frame per record), or over an ArduPilot "
+            "on-board DataFlash log (.bin, or its text form .log; --signals names its messages, e.g. AOA.AOA, "
+            "TimeUS is the clock), with u(k) read from the vehicle's actuator report: the same assembler and "
+            "estimator as 'run --observe'. Prints the report of 'fault-monitor replay' and what the log holds; "
+            "--rrd also writes the recording in the same layout as 'run'."),
         epilog="Example: fault-monitor analyse flight.tlog --plant paper-continuous --gains gains.toml "
                "--rrd flight.rrd --fault bias:2@20")
-    p.add_argument("tlog", metavar="FLIGHT.tlog", help="the telemetry log")
+    p.add_argument("tlog", metavar="FLIGHT.tlog", help="the telemetry log (.tlog), or a DataFlash log (.bin, .log)")
     from monitor.commands.run import add_alarm_arguments, add_model_arguments
 
     add_model_arguments(p, fleet=False)
@@ -50,7 +52,10 @@ def run(args: argparse.Namespace) -> int:
         parse_fault_spec(args.fault)  # a bad SPEC is a one-line error before the work starts
     if not Path(args.tlog).is_file():
         raise UserError(f"{args.tlog}: no such log file")
-    fleet = load_models(args)
+    from monitor.link.dataflash import dataflash_kind, open_dataflash
+
+    dlog = open_dataflash(args.tlog) if dataflash_kind(args.tlog) else None  # an on-board DataFlash log
+    fleet = load_models(args, layouts=dlog.layouts if dlog is not None else None)
     alarm = alarm_from_args(args, fleet)
     model = fleet.default
     properties = {"monitor_version": __version__, "mode": "observe (analyse)", "source_log": str(args.tlog),
@@ -69,10 +74,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"analyse: {fraction:.0%} of {args.tlog}, {samples} samples", file=sys.stderr, flush=True)
 
     try:
-        result = analyse_log(args.tlog, fleet, alarm, sysid=args.sysid, recorder=recorder, progress=progress)
+        if dlog is not None:
+            from monitor.service.offline import analyse_dataflash
+
+            result = analyse_dataflash(dlog, fleet, alarm, sysid=args.sysid, recorder=recorder, progress=progress)
+        else:
+            result = analyse_log(args.tlog, fleet, alarm, sysid=args.sysid, recorder=recorder, progress=progress)
     finally:
         if recorder is not None:
             recorder.close()
+        if dlog is not None:
+            dlog.close()
     if result.extra.get("commands_in_log"):
         print(f"analyse: note: the log holds {result.extra['commands_in_log']} SET_ACTUATOR_CONTROL_TARGET commands "
               "(a monitor-controlled flight); analyse reads the actuator report as the vehicle's own u(k) "
@@ -85,9 +97,8 @@ def run(args: argparse.Namespace) -> int:
         from monitor.link.log_inventory import why_no_samples
 
         sig = model.signals
-        frames = (f"{inventory.frames_v1} MAVLink 1 and {inventory.frames_v2} MAVLink 2 frames over "
-                  f"{inventory.span_s:.1f} s")
-        raise UserError(f"{args.tlog}: no sample could be assembled from {result.log_records} log records ({frames}); "
+        raise UserError(f"{args.tlog}: no sample could be assembled from {result.log_records} log records "
+                        f"({inventory.describe()}); "
                         + why_no_samples(inventory, sig, (*sig.outputs, *sig.actuator), args.sysid, model.plant.h))
     recording = Recording(path=Path(args.rrd or args.tlog), application_id="fault-monitor analyse",
                           properties={**properties, "fault_monitor_version": __version__}, vehicles=vehicles,

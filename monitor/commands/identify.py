@@ -51,7 +51,8 @@ _LONG_LOG_RECORDS = 20_000  # a log this long gets progress lines on stderr (a 5
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "identify", help="identify a continuous plant from a flight log (.tlog) with an elevator manoeuvre",
+        "identify", help="identify a continuous plant from a flight log (.tlog, or DataFlash .bin/.log) with an "
+                         "elevator manoeuvre",
         description=(
             "Fit x' = A_c x + B_c u (deviations from the operating point) to a telemetry log of a flight with an "
             "elevator manoeuvre (e.g. sim-vehicle run --excite prbs:1:60), every state measured: least squares on "
@@ -59,16 +60,18 @@ def register(subparsers) -> None:
             "validated by a free run over the last 30 % of the manoeuvre, which it was not fitted on (fit % per "
             "output, NRMSE). Writes a plant file that 'fault-monitor design' takes as it is, with its signal map "
             "and operating point. Exit 2 with one line when the log cannot be identified from (no excitation, "
-            "missing signals, too short)."),
+            "missing signals, too short). An ArduPilot on-board DataFlash log (.bin, or its text form .log) is read "
+            "too, with --signals naming its own messages (e.g. AOA.AOA, RATE.P, RCOU.C2) and TimeUS as the clock."),
         epilog="Example: fault-monitor identify flight.tlog --out c172p.toml && "
                "fault-monitor design --plant c172p.toml --out gains.toml")
-    p.add_argument("tlog", metavar="FLIGHT.tlog", help="the telemetry log (MAVProxy / QGroundControl format)")
+    p.add_argument("tlog", metavar="FLIGHT.tlog", help="the telemetry log (MAVProxy / QGroundControl format), or a "
+                   "DataFlash log (.bin, .log)")
     p.add_argument("--out", required=True, metavar="PLANT.toml", help="the plant file to write")
     p.add_argument("--model", choices=("short-period", "longitudinal"), default="longitudinal",
                    help="states: short-period = alpha, q; longitudinal = alpha, q, theta, airspeed "
                         "(default: longitudinal)")
     p.add_argument("--h", type=float, metavar="S", help="sampling period of the plant, a whole multiple of the "
-                   "log's own sample spacing (default: that spacing, from the AOA_SSA time stamps)")
+                   "log's own sample spacing (default: that spacing, from the instant message's time stamps)")
     p.add_argument("--tau-max", type=float, metavar="S", help="upper bound of the network delay written to the "
                    "plant, 0 <= S < h (default: 0.46 h)")
     p.add_argument("--actuator-limit", type=float, metavar="DEG", default=DEFAULT_ACTUATOR_LIMIT,
@@ -101,7 +104,7 @@ def _signals_table(path: str | None) -> tuple[dict[str, Any], str]:
     return raw["signals"], str(path)
 
 
-def _map_for(table: dict[str, Any], source: str, states: tuple[str, ...]):
+def _map_for(table: dict[str, Any], source: str, states: tuple[str, ...], layouts=None):
     """``(SignalMap, written)``: the project's signal map of ``states`` and the actuator, and the ``[signals]``
     table for the plant file (without its operating point, which the identification adds)."""
     from monitor.errors import UserError
@@ -123,6 +126,8 @@ def _map_for(table: dict[str, Any], source: str, states: tuple[str, ...]):
                                "measured": {s: measured[s] for s in (*states, actuator[0])},
                                "command": table.get("command",
                                                     tomllib.loads(IDENTIFY_SIGNALS_TOML)["signals"]["command"])}
+    if layouts is not None:
+        return parse_signals(written, source, len(states), 1, layouts), written
     return parse_signals(written, source, len(states), 1), written
 
 
@@ -199,11 +204,11 @@ def _checked(req: IdentifyRequest) -> None:
         raise UserError(f"--actuator-limit must be a positive number of degrees, got {req.actuator_limit}")
 
 
-def _periods(req: IdentifyRequest, smap) -> tuple[float, int, float]:
+def _periods(req: IdentifyRequest, smap, dlog=None) -> tuple[float, int, float]:
     """``(h_read, ratio, tau_max)``: the log's own spacing, the decimation to the plant's h, and the delay bound."""
     from monitor.errors import UserError
 
-    spacing = log_spacing(req.log, smap.instant, req.sysid)
+    spacing = log_spacing(req.log, smap.instant, req.sysid, dataflash=dlog)
     h_read = spacing or req.h or 0.05
     ratio = 1
     if req.h is not None and spacing is not None:
@@ -234,23 +239,41 @@ def _vehicle(req: IdentifyRequest, flight: FlightLog, smap, states: tuple[str, .
 
 
 def identify_log(req: IdentifyRequest, say: Callable[[str], None] = lambda _text: None) -> IdentifiedLog:
-    """Read ``req.log``, identify the model, write ``req.out`` (loadable as it is); UserError names what is wrong."""
+    """Read ``req.log`` (a tlog, or a DataFlash log: ``.bin``/``.log``), identify the model, write ``req.out``
+    (loadable as it is); UserError names what is wrong."""
+    from monitor.link.dataflash import dataflash_kind, open_dataflash
+
+    _checked(req)
+
+    dlog = open_dataflash(req.log) if dataflash_kind(req.log) else None  # an on-board DataFlash log
+    try:
+        return _identify(req, say, dlog)
+    finally:
+        if dlog is not None:
+            dlog.close()
+
+
+def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> IdentifiedLog:
+    """``identify_log`` once the log is open (``dlog``: the DataFlash log, None for a tlog)."""
     import numpy as np
 
     from monitor.errors import UserError
     from monitor.model.identification import MODELS, FlightData, identify, plant_toml
     from monitor.model.plant import parse_plant
 
-    _checked(req)
     states = MODELS[req.model]
+    if dlog is not None and req.signals is None:
+        hints = "; ".join(dlog.inventory.providers(("angle of attack", "body rates (gyro)", "attitude", "airspeed",
+                                                     "actuator output")))
+        raise UserError(f"{req.log}: {dlog.layouts.no_map()}; the log has {hints}")
     table, source = _signals_table(req.signals)
-    smap, written = _map_for(table, source, states)
-    h_read, ratio, tau_max = _periods(req, smap)
+    smap, written = _map_for(table, source, states, dlog.layouts if dlog is not None else None)
+    h_read, ratio, tau_max = _periods(req, smap, dlog)
     h = h_read * ratio
 
     started = time.perf_counter()
     flight = read_flight(req.log, smap, h_read, req.sysid,
-                         progress=lambda f, n: say(f"{f:.0%} of {req.log}, {n} samples"))
+                         progress=lambda f, n: say(f"{f:.0%} of {req.log}, {n} samples"), dataflash=dlog)
     sysid = _vehicle(req, flight, smap, states)
     reason = _missing_signals(flight, sysid, smap, states, req.model)
     if reason:

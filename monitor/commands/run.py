@@ -22,8 +22,10 @@ def add_model_arguments(p: argparse.ArgumentParser, fleet: bool = True) -> None:
                        help="per-vehicle models: [vehicle.<sysid>] tables with plant, gains and optional signals")
 
 
-def load_models(args: argparse.Namespace):
-    """The fleet from ``--plant/--gains/--signals`` and ``--fleet``; one-line errors for what is missing."""
+def load_models(args: argparse.Namespace, layouts=None):
+    """The fleet from ``--plant/--gains/--signals`` and ``--fleet``; one-line errors for what is missing.
+
+    ``layouts``: where signal maps look their message names up (default: the MAVLink dialect)."""
     from monitor.errors import UserError
     from monitor.service.vehicles import Fleet, load_fleet, load_model
 
@@ -34,7 +36,10 @@ def load_models(args: argparse.Namespace):
         raise UserError("give --plant and --gains" + (", or --fleet FLEET.toml" if hasattr(args, "fleet") else ""))
     if args.signals and args.plant is None:
         raise UserError("--signals applies to --plant; in a fleet file give each vehicle a 'signals' key")
-    default = load_model(args.plant, args.gains, args.force, args.signals) if args.plant else None
+    from monitor.link.signals import MAVLINK
+
+    default = (load_model(args.plant, args.gains, args.force, args.signals, layouts or MAVLINK) if args.plant
+               else None)
     return load_fleet(fleet_file, default, args.force) if fleet_file else Fleet(default)
 
 

@@ -12,5 +12,9 @@
     monitor.service.vehicles -> monitor.model.estimator   (the vehicle table and eqs. (5)-(6))
 
 ``fault-monitor run`` and ``fault-monitor analyse`` share everything from ``frames`` down; the only
-difference is whether a command goes back (``monitor.service.pipeline``).
+difference is whether a command goes back (``monitor.service.pipeline``). Frames are MAVLink 1 or 2.
+
+Logs: ``tlog`` (a MAVLink byte source), ``dataflash`` (ArduPilot's on-board logs through pymavlink's DFReader:
+records by name, TimeUS the clock, fed to the same signal map and assembler), ``log_inventory`` (what a log
+holds), ``flight_log`` (a log's samples for ``identify``).
 """

@@ -38,6 +38,7 @@ class MessageLayout:
     lengths: dict[str, int]  # values per field: N for numeric arrays, 1 for scalars and char arrays
     is_text: dict[str, bool]
     codes: dict[str, str] = dc_field(default_factory=dict)  # struct code of each field ('I': uint32, 'Q': uint64...)
+    time_names: tuple[tuple[str, int], ...] = TIME_FIELDS  # DataFlash: TimeUS, TimeMS
 
     def wrap(self, field: str) -> int:
         """Units after which ``field`` wraps: 2^32 for a 32-bit time field (``time_boot_ms``, SERVO_OUTPUT_RAW's
@@ -57,7 +58,7 @@ class MessageLayout:
 
     def time_field(self) -> tuple[str, int] | None:
         """(field, microseconds per unit) of the field that stamps this message's instant, if any."""
-        for name, unit_us in TIME_FIELDS:
+        for name, unit_us in self.time_names:
             if name in self.offsets:
                 return name, unit_us
         return None

@@ -5,8 +5,8 @@ not have (a MAVLink 1 log has no ``AOA_SSA``; an ArduCopter sends ``SERVO_OUTPUT
 ``ACTUATOR_OUTPUT_STATUS``). Saying what the log holds, and which of its messages could carry each missing
 signal, turns "no sample" into a signal map the user can write. ``analyse`` and ``identify`` feed the
 inventory from the pass they make anyway (``add_frames``, per record), so it costs no second read;
-``read_inventory`` is the same pass on its own. DataFlash logs fill the same inventory by message name
-(``add_message``; no system ids, no MAVLink version).
+``read_inventory`` is the same pass on its own. DataFlash logs fill the same inventory by message name (no
+system ids, no MAVLink version), from their reader's per-message counts (``add_counts``).
 
 Rates are counts over the log's time span (first to last record time stamp), so a message sent in bursts
 or only part of the flight shows its average, not its peak.
@@ -61,6 +61,7 @@ class LogInventory:
         self.first_us: int | None = None
         self.last_us: int | None = None
         self._counts: dict[tuple[int, int | str], int] = {}  # (sysid, msgid or DataFlash name) -> count
+        self._timed: set[str] = set()  # DataFlash messages with a TimeUS
 
     # --- filling ---------------------------------------------------------------------------------------
     def add_frames(self, t_us: int, frames: Sequence[RawFrame], v1: int = 0) -> None:
@@ -76,16 +77,19 @@ class LogInventory:
         self.frames_v1 += v1
         self.frames_v2 += len(frames) - v1
 
-    def add_message(self, t_us: int | None, name: str) -> None:
-        """One DataFlash record (a message by name; ``t_us`` its TimeUS when it has one)."""
-        self.records += 1
-        if t_us is not None:
+    def add_counts(self, name: str, count: int, first_us: int | None, last_us: int | None) -> None:
+        """A DataFlash message: how many records of it, and the TimeUS of its first and last (None: no time)."""
+        self.records += count
+        for t_us in (first_us, last_us):
+            if t_us is None:
+                continue
+            self._timed.add(name)
             if self.first_us is None or t_us < self.first_us:
                 self.first_us = t_us
             if self.last_us is None or t_us > self.last_us:
                 self.last_us = t_us
         key = (0, name)
-        self._counts[key] = self._counts.get(key, 0) + 1
+        self._counts[key] = self._counts.get(key, 0) + count
 
     # --- reading ---------------------------------------------------------------------------------------
     @property
@@ -98,7 +102,7 @@ class LogInventory:
         """Every message in the log (only ``sysid``'s if given), most frequent first."""
         by: dict[int | str, MessageStats] = {}
         for (sys_, key), n in self._counts.items():
-            if sysid is not None and sys_ != sysid:
+            if sysid is not None and self.kind == "tlog" and sys_ != sysid:
                 continue
             stats = by.get(key)
             if stats is None:
@@ -129,6 +133,12 @@ class LogInventory:
         span = self.span_s
         return count / span if span > 0 else None
 
+    def describe(self) -> str:
+        """``220 MAVLink 1 and 20 MAVLink 2 frames over 39.0 s`` (a DataFlash log: its records), for errors."""
+        if self.kind == "tlog":
+            return f"{self.frames_v1} MAVLink 1 and {self.frames_v2} MAVLink 2 frames over {self.span_s:.1f} s"
+        return f"{self.records} DataFlash records over {self.span_s:.1f} s"
+
     def as_dict(self) -> dict[str, Any]:
         """The ``--json`` block: what the log holds."""
         return {"kind": self.kind, "records": self.records, "frames_v1": self.frames_v1,
@@ -148,9 +158,9 @@ class LogInventory:
         """A few lines for people: what the log is, its system ids, its messages with their rates."""
         if self.kind == "tlog":
             what = f"{self.frames_v1 + self.frames_v2} frames (MAVLink 1: {self.frames_v1}, MAVLink 2: {self.frames_v2})"
+            out = [f"{self.records} records over {self.span_s:.1f} s, {what}"]
         else:
-            what = "DataFlash messages"
-        out = [f"{self.records} records over {self.span_s:.1f} s, {what}"]
+            out = [f"{self.records} DataFlash records over {self.span_s:.1f} s of TimeUS, {len(self._counts)} messages"]
         ids = self.sysids()
         if ids:
             out.append("system ids " + ", ".join(f"{s} ({n} frames)" for s, n in ids.items()))
@@ -175,7 +185,8 @@ class LogInventory:
         out = []
         for m in self.messages(sysid):
             if self.kind != "tlog":
-                out.append(m.name)
+                if m.name in self._timed and m.name not in ("FMT", "FMTU", "UNIT", "MULT", "PARM", "MSG"):
+                    out.append(m.name)
                 continue
             layout = layout_by_name(m.name)
             if layout is not None and "time_usec" in layout.offsets:
@@ -191,8 +202,10 @@ def field_ref(signal) -> str:
 
 
 def _kinds_of(signal_name: str, message: str) -> tuple[str, ...]:
-    found = tuple(kind for kind, names in SIGNAL_KINDS.items() if message in names)
-    return found or _KIND_BY_SIGNAL_NAME.get(signal_name.lower(), ())
+    """What a signal is: by its name when it is one of the plant's usual ones (alpha, q, theta...), else by the
+    kinds its message carries."""
+    return _KIND_BY_SIGNAL_NAME.get(signal_name.lower()) or tuple(
+        kind for kind, names in SIGNAL_KINDS.items() if message in names)
 
 
 def explain_missing(inventory: LogInventory, smap, names: Sequence[str], sysid: int | None = None) -> str | None:
@@ -208,7 +221,7 @@ def explain_missing(inventory: LogInventory, smap, names: Sequence[str], sysid: 
         parts.append(f"the instant ({smap.instant})")
     parts += [f"{n} ({field_ref(smap.measured[n])})" for n in absent]
     messages = sorted({smap.measured[n].message for n in absent} | ({smap.instant} if instant_absent else set()))
-    where = f" from sysid {sysid}" if sysid is not None else ""
+    where = f" from sysid {sysid}" if sysid is not None and inventory.kind == "tlog" else ""
     line = f"missing signals: {', '.join(parts)}: the log has no {' or '.join(messages)}{where}"
     kinds = [k for n in absent for k in _kinds_of(n, smap.measured[n].message)]
     hints = inventory.providers(kinds, sysid) if kinds else []

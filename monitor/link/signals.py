@@ -52,7 +52,28 @@ from monitor.errors import UserError
 from monitor.link.dialect import MessageLayout, layout_by_name
 
 __all__ = ["Signal", "CommandMap", "SignalMap", "DEFAULT_SIGNALS_TOML", "default_signal_map", "parse_signals",
-           "load_signals_file", "signals_for_plant"]
+           "load_signals_file", "signals_for_plant", "Layouts", "MAVLINK"]
+
+
+class Layouts:
+    """Where the names of a signal map are looked up: the MAVLink dialect (links, tlogs), or the messages a
+    DataFlash log declares in its FMT records (``monitor.link.dataflash``). Same map syntax, same checks."""
+
+    kind = "MAVLink"
+    instant_field = "time_usec"  # the microsecond field an instant message needs
+
+    def __call__(self, name: str) -> MessageLayout | None:
+        return layout_by_name(name)
+
+    def unknown(self, name: str) -> str:
+        return f"unknown MAVLink message '{name}' (ardupilotmega dialect)"
+
+    def no_map(self) -> str | None:
+        """Why there is no default signal map here (None: the contract's default applies)."""
+        return None
+
+
+MAVLINK = Layouts()
 
 DEFAULT_SIGNALS_TOML = """
 [signals]
@@ -183,13 +204,13 @@ class SignalMap:
         return f"instant {self.instant}; {outs}"
 
 
-def _field_ref(text: Any, where: str) -> tuple[MessageLayout, str, int]:
+def _field_ref(text: Any, where: str, layouts: Layouts) -> tuple[MessageLayout, str, int]:
     if not isinstance(text, str) or "." not in text:
         raise UserError(f"{where}: expected 'MESSAGE.field' or 'MESSAGE.field[index]', got {text!r}")
     message, _, rest = text.partition(".")
-    layout = layout_by_name(message)
+    layout = layouts(message)
     if layout is None:
-        raise UserError(f"{where}: unknown MAVLink message '{message}' (ardupilotmega dialect)")
+        raise UserError(f"{where}: {layouts.unknown(message)}")
     field, index = rest, 0
     if rest.endswith("]") and "[" in rest:
         field, _, idx = rest[:-1].partition("[")
@@ -225,8 +246,9 @@ def _number_list(value: Any, n: int, where: str, key: str, kind: type) -> tuple:
     return tuple(kind(v) for v in value)
 
 
-def parse_signals(raw: Any, source: str, outputs: int, inputs: int) -> SignalMap:
-    """Validate a ``[signals]`` table for a plant with ``outputs`` rows of C and ``inputs`` inputs."""
+def parse_signals(raw: Any, source: str, outputs: int, inputs: int, layouts: Layouts = MAVLINK) -> SignalMap:
+    """Validate a ``[signals]`` table for a plant with ``outputs`` rows of C and ``inputs`` inputs (names looked up
+    in ``layouts``: the MAVLink dialect, or a DataFlash log's own messages)."""
     where = f"{source}: [signals]"
     if not isinstance(raw, dict):
         raise UserError(f"{where}: must be a table")
@@ -245,7 +267,7 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int) -> SignalMap
         bad = sorted(set(spec) - _SIGNAL_KEYS)
         if bad:
             raise UserError(f"{w}: unknown key '{bad[0]}' (known: field, scale, offset, unit, range, hold)")
-        layout, field, index = _field_ref(spec.get("field"), w)
+        layout, field, index = _field_ref(spec.get("field"), w, layouts)
         scale = spec.get("scale", 1.0)
         if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale == 0:
             raise UserError(f"{w}: 'scale' must be a finite non-zero number")
@@ -274,13 +296,13 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int) -> SignalMap
         measured[name] = Signal(name, layout.name, field, index, layout.position(field, index), float(scale),
                                 str(spec.get("unit", "")), float(offset), bounds, hold)
     instant = raw.get("instant")
-    instant_layout = layout_by_name(instant) if isinstance(instant, str) else None
+    instant_layout = layouts(instant) if isinstance(instant, str) else None
     if instant_layout is None:
-        raise UserError(f"{where}: 'instant' must name a MAVLink message, got {instant!r}")
+        raise UserError(f"{where}: 'instant' must name a {layouts.kind} message, got {instant!r}")
     stamp = instant_layout.time_field()
-    if stamp is None or stamp[0] != "time_usec":
-        raise UserError(f"{where}: the instant message {instant_layout.name} needs a time_usec field")
-    time_fields[instant_layout.name] = (instant_layout.position("time_usec"), 1, instant_layout.wrap("time_usec"))
+    if stamp is None or stamp[0] != layouts.instant_field:
+        raise UserError(f"{where}: the instant message {instant_layout.name} needs a {layouts.instant_field} field")
+    time_fields[instant_layout.name] = (instant_layout.position(stamp[0]), 1, instant_layout.wrap(stamp[0]))
     outs = _names(raw, "outputs", where, measured)
     if len(outs) != outputs:
         raise UserError(f"{where}: 'outputs' names {len(outs)} signal(s) but the plant has {outputs} output(s) (rows of C)")
@@ -352,7 +374,7 @@ def default_signal_map(outputs: int = 1, inputs: int = 1) -> SignalMap:
     return parse_signals(tomllib.loads(DEFAULT_SIGNALS_TOML)["signals"], "default signal map", outputs, inputs)
 
 
-def load_signals_file(path: str | Path, outputs: int, inputs: int) -> SignalMap:
+def load_signals_file(path: str | Path, outputs: int, inputs: int, layouts: Layouts = MAVLINK) -> SignalMap:
     """A TOML file holding a ``[signals]`` table (a plant file with one works too)."""
     path = Path(path)
     try:
@@ -363,16 +385,19 @@ def load_signals_file(path: str | Path, outputs: int, inputs: int) -> SignalMap:
         raise UserError(f"{path}: cannot read signal map: {exc}") from None
     if "signals" not in raw:
         raise UserError(f"{path}: no [signals] table")
-    return parse_signals(raw["signals"], str(path), outputs, inputs)
+    return parse_signals(raw["signals"], str(path), outputs, inputs, layouts)
 
 
-def signals_for_plant(plant, signals_file: str | Path | None = None) -> SignalMap:
+def signals_for_plant(plant, signals_file: str | Path | None = None, layouts: Layouts = MAVLINK) -> SignalMap:
     """``--signals FILE`` if given, else the plant file's own ``[signals]`` table, else the default."""
     if signals_file is not None:
-        return load_signals_file(signals_file, plant.l, plant.m)
+        return load_signals_file(signals_file, plant.l, plant.m, layouts)
     raw = getattr(plant, "signals", None)
     if raw is not None:
-        return parse_signals(raw, plant.name, plant.l, plant.m)
+        return parse_signals(raw, plant.name, plant.l, plant.m, layouts)
+    reason = layouts.no_map()
+    if reason is not None:
+        raise UserError(f"plant {plant.name} has no [signals] table: {reason}")
     if plant.l != 1 or plant.m != 1:
         raise UserError(f"plant {plant.name}: has {plant.l} output(s) and {plant.m} input(s); the default signal map "
                         "is for 1 and 1 (alpha, elevator): give a [signals] table or --signals FILE")

@@ -24,7 +24,7 @@ from monitor.service.pipeline import Pipeline
 from monitor.service.records import SampleRecord
 from monitor.service.vehicles import Fleet, VehicleTable
 
-__all__ = ["LogAnalysis", "analyse_log"]
+__all__ = ["LogAnalysis", "analyse_log", "analyse_dataflash"]
 
 log = logging.getLogger("monitor.analyse")
 
@@ -102,3 +102,39 @@ def analyse_log(path: str | Path, fleet: Fleet, alarm: AlarmConfig, sysid: int |
         pipeline.flush(last * 1e-6, last * 1e-6)
     return LogAnalysis(collect.records, pipeline.counts(), stats.records, stats.skipped_bytes, stats.truncated,
                        time.perf_counter() - start, first, last, {"commands_in_log": commands}, inventory)
+
+
+def analyse_dataflash(dlog, fleet: Fleet, alarm: AlarmConfig, sysid: int | None = None, recorder=None,
+                      progress: Callable[[float, int], None] | None = None,
+                      progress_every_s: float = 2.0) -> LogAnalysis:
+    """The same observer over an ArduPilot DataFlash log (``monitor.link.dataflash.DataFlashLog``): its records
+    of the messages the signal maps name, by name, with TimeUS as the clock; one vehicle (sysid 1 or ``sysid``)."""
+    from monitor.link.dataflash import DATAFLASH_SYSID, wanted_fields
+
+    start = time.perf_counter()
+    table = VehicleTable(fleet, alarm, timeout=float("inf"), observe=True)
+    collect = _Collect(recorder)
+    pipeline = Pipeline(table, send_commands=False, gcs_feedback=False, recorder=collect)
+    wanted: dict[str, set[str]] = {}
+    for model in fleet.models():
+        for name, cols in wanted_fields(model.signals, dlog.layouts).items():
+            wanted.setdefault(name, set()).update(cols)
+    label = sysid if sysid is not None else DATAFLASH_SYSID
+    total = max(sum(dlog.counts.get(n, 0) for n in wanted), 1)
+    first = last = None
+    next_report = start + progress_every_s
+    on_message = pipeline.on_message
+    for n, (name, values, t_us) in enumerate(dlog.records(wanted), 1):
+        if first is None:
+            first = t_us
+        last = t_us
+        t = t_us * 1e-6
+        on_message(label, name, values, t, t)
+        if progress is not None and n % 4096 == 0 and time.perf_counter() >= next_report:
+            next_report = time.perf_counter() + progress_every_s
+            progress(n / total, len(collect.records))
+    if last is not None:
+        pipeline.flush(last * 1e-6, last * 1e-6)
+    return LogAnalysis(collect.records, pipeline.counts(), dlog.inventory.records, 0, False,
+                       time.perf_counter() - start, first, last, {"dataflash_records_read": dlog.records_read},
+                       dlog.inventory)

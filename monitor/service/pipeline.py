@@ -75,7 +75,8 @@ class Pipeline:
         for model in table.fleet.models():
             for name in {model.signals.instant, *(s.message for s in model.signals.measured.values())}:
                 layout = layout_by_name(name)
-                self._wanted[layout.msgid] = (layout.name, layout)
+                if layout is not None:  # a DataFlash map names the log's messages (fed by on_message)
+                    self._wanted[layout.msgid] = (layout.name, layout)
 
     # --- hot path ------------------------------------------------------------------------------------
     def on_frames(self, route: object, frames: list[RawFrame], t0_ns: int, now: float | None = None,
@@ -108,6 +109,12 @@ class Pipeline:
                         continue
                     answered.add(sysid)
                 self._handle(vehicle, sample, now, wall, t0_ns)
+
+    def on_message(self, sysid: int, name: str, values: tuple, now: float, wall: float) -> None:
+        """One message already decoded by name (a DataFlash log's record: ``values`` in its FMT column order),
+        filed like a frame's payload; nothing to answer (route None)."""
+        for vehicle, sample in self.table.message(sysid, name, values, None, now):
+            self._handle(vehicle, sample, now, wall, time.perf_counter_ns())
 
     def poll(self, now: float | None = None, wall: float | None = None) -> None:
         """Process samples whose wait for an actuator report ran out (called every few ms by the daemon)."""

@@ -36,7 +36,7 @@ from monitor.errors import UserError
 from monitor.model.estimator import Estimator, EstimatorState, StepResult
 from monitor.gains import GainsFile, read_gains
 from monitor.link.assembly import AssembledSample, AssemblyCounters, SampleAssembler
-from monitor.link.signals import SignalMap, signals_for_plant
+from monitor.link.signals import MAVLINK, Layouts, SignalMap, signals_for_plant
 from monitor.model.plant import Plant, load_plant
 from monitor.service.alarm import Alarm, AlarmConfig
 from monitor.service.delay import DelayTracker
@@ -70,8 +70,10 @@ class VehicleModel:
 
 
 def load_model(plant_spec: str | Path, gains_path: str | Path, force: bool = False,
-               signals_file: str | Path | None = None) -> VehicleModel:
-    """Load and cross-check a plant and its gains; a plant-hash mismatch is a UserError unless ``force``."""
+               signals_file: str | Path | None = None, layouts: Layouts = MAVLINK) -> VehicleModel:
+    """Load and cross-check a plant and its gains; a plant-hash mismatch is a UserError unless ``force``.
+
+    ``layouts``: where the signal map's message names are looked up (a DataFlash log's own, for ``analyse``)."""
     plant = load_plant(plant_spec)
     gains = read_gains(gains_path)
     gains.check_plant(plant)
@@ -82,7 +84,7 @@ def load_model(plant_spec: str | Path, gains_path: str | Path, force: bool = Fal
         if not force:
             raise UserError(f"{what}; use --force to run it anyway")
         log.warning("%s; running anyway (--force)", what)
-    signals = signals_for_plant(plant, signals_file)
+    signals = signals_for_plant(plant, signals_file, layouts)
     limit = plant.actuator.limit
     if limit is not None:
         for name, u0 in zip(signals.actuator, signals.u0):
