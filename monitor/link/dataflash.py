@@ -76,6 +76,10 @@ class DataFlashLayouts(Layouts):
     def names(self) -> list[str]:
         return sorted(self._formats)
 
+    def format_of(self, name: str) -> Any:
+        """pymavlink's ``DFFormat`` of a message (its instance column, multipliers), or None."""
+        return self._formats.get(name)
+
     def __call__(self, name: str) -> MessageLayout | None:
         layout = self._cache.get(name)
         if layout is None:
@@ -194,7 +198,7 @@ class DataFlashLog:
             stamp = layout.time_field()
             if stamp is None:
                 continue
-            fmt = self.layouts._formats[name]
+            fmt = self.layouts.format_of(name)
             plan[name] = (len(layout.fields), [(layout.offsets[c], c) for c in cols if c in layout.offsets],
                           getattr(fmt, "instance_field", None), layout.offsets[stamp[0]], stamp[1])
         if not plan:

@@ -31,7 +31,7 @@ SIGNAL_KINDS: dict[str, tuple[str, ...]] = {
     "attitude": ("ATTITUDE", "ATTITUDE_QUATERNION", "AHRS2", "AHRS3", "SIMSTATE", "SIM_STATE", "HIL_STATE",
                  "HIL_STATE_QUATERNION", "ATT", "AHR2", "CTUN", "SIM"),
     "body rates (gyro)": ("ATTITUDE", "RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU",
-                          "HIL_STATE", "RATE", "IMU", "GYR"),
+                          "HIL_STATE", "RATE", "PIDP", "IMU", "GYR"),
     "airspeed": ("VFR_HUD", "AIRSPEED", "SCALED_PRESSURE", "HIL_STATE", "ARSP", "CTUN"),
     "actuator output": ("ACTUATOR_OUTPUT_STATUS", "SERVO_OUTPUT_RAW", "HIL_ACTUATOR_CONTROLS", "ACTUATOR_CONTROL_TARGET",
                         "HIL_CONTROLS", "RCOU", "CTUN"),
