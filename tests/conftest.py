@@ -21,12 +21,16 @@ import pytest
 from tests.designs import CACHE_ENV
 
 E2E = Path(__file__).parent / "e2e"
+# end-to-end modules whose verdicts do not hang on the wall-clock pace of a closed loop (a vehicle alone,
+# seeded draws, warnings, a log read back): they may share the CPU with another test, as unit tests do
+NOT_PACED = {"test_sim_vehicle", "test_router", "test_identify_flight", "test_link_peers", "test_sim_aircraft"}
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
         path = Path(str(item.fspath))
-        group = "e2e-daemons" if E2E in path.parents else f"module-{path.stem}"
+        paced = E2E in path.parents and path.stem not in NOT_PACED
+        group = "e2e-daemons" if paced else f"module-{path.stem}"
         item.add_marker(pytest.mark.xdist_group(group))
 
 
