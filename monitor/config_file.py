@@ -9,7 +9,10 @@ A file holds the long flag names, spelled with ``-`` or ``_``, and the values a 
     alarm_threshold = 1.0
     no_gcs_feedback = true                  # an on/off flag takes true/false
 
-The values become the parser's defaults, so a flag given on the command line still wins.
+The values become the parser's defaults, so a flag given on the command line still wins. For a repeatable
+flag that means the flags given *replace* the file's whole list (``--config monitor.toml --mavlink X``
+listens on X alone); to add to the file's list, repeat its entries on the command line. One rule for every
+flag, and a way to replace a list, which appending to it could not give.
 
 Why strict: an unknown key (``dealy``) or a value of the wrong type silently ignored would run another
 experiment than the one written down, so each is a one-line ``UserError`` naming the key and the file.
@@ -150,16 +153,31 @@ def _chosen_subparser(parser: argparse.ArgumentParser, args: argparse.Namespace)
     return parser
 
 
+def _repeatable_given(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict[str, Any]:
+    """``{dest: values}`` of the repeatable flags given on the command line (their values differ from the default)."""
+    given = {}
+    for action in parser._actions:
+        if isinstance(action, argparse._AppendAction) and getattr(args, action.dest, None) != action.default:
+            given[action.dest] = getattr(args, action.dest)
+    return given
+
+
 def parse_args_with_config(parser: argparse.ArgumentParser, argv: Sequence[str] | None = None,
                            option: str = "config") -> argparse.Namespace:
     """Parse ``argv``; when the chosen (sub-)command got ``--config FILE``, preset it from FILE and parse again.
 
     Any command that declares ``--config`` gets the behaviour for free; a command without it is parsed once.
+    A repeatable flag given on the command line replaces the file's list (argparse alone would append to it).
     A bad file raises ``UserError`` (the caller prints it as one line).
     """
     args = parser.parse_args(argv)
     path = getattr(args, option, None)
     if not path:
         return args
-    apply_config_file(_chosen_subparser(parser, args), path)
-    return parser.parse_args(argv)
+    chosen = _chosen_subparser(parser, args)
+    given = _repeatable_given(chosen, args)
+    apply_config_file(chosen, path)
+    args = parser.parse_args(argv)
+    for dest, values in given.items():
+        setattr(args, dest, values)
+    return args

@@ -33,14 +33,16 @@ def test_the_readme_monitor_file_sets_run_flags_and_flags_still_win(tmp_path):
     conf = tmp_path / "monitor.toml"
     conf.write_text(_readme_monitor_toml())
     parser = monitor_parser()
-    apply_config_file(_sub(parser, "run"), conf)
-    args = parser.parse_args(["run", "--name", "from-flag", "--mavlink", "udpin:127.0.0.1:14551"])
+    args = parse_args_with_config(parser, ["run", "--config", str(conf), "--name", "from-flag", "--mavlink",
+                                           "udpin:127.0.0.1:14551", "--mavlink", "udpin:127.0.0.1:14552"])
     assert args.plant == "paper-continuous" and args.gains == "/etc/fault-monitor/gains.toml"
     assert args.zenoh_listen == ["tcp/127.0.0.1:7447"] and args.alarm_threshold == 1.0
     assert args.rrd == "/var/lib/fault-monitor/run.rrd" and args.log_level == "INFO"
     assert args.name == "from-flag"  # the command line wins over the file
-    # an append flag given on the command line extends the file's list (argparse appends to the default)
-    assert args.mavlink[-1] == "udpin:127.0.0.1:14551"
+    # a repeatable flag given on the command line replaces the file's whole list, as any other flag does
+    assert args.mavlink == ["udpin:127.0.0.1:14551", "udpin:127.0.0.1:14552"]
+    kept = parse_args_with_config(monitor_parser(), ["run", "--config", str(conf)])
+    assert kept.mavlink == ["udpin:127.0.0.1:14550"]  # not given: the file's list
     assert "systemd" in (REPO / "README.md").read_text() and \
         "fault-monitor run --config /etc/fault-monitor/monitor.toml" in (REPO / "README.md").read_text()
 
