@@ -85,6 +85,7 @@ class SampleTruth:
     tau_drawn: float
     tau: float | None = None
     late: bool = False
+    onboard: bool = False  # the vehicle's own command (autopilot, excitation) acted, not an answer from outside
     extras: dict = field(default_factory=dict)  # the model's own keys (an aircraft: surface, trim, ...)
 
     def payload(self, sysid: int, u: float, unit: str) -> dict:
@@ -220,6 +221,7 @@ class Simulation:
             onboard = model.trim_deflection + level
         if onboard is not None:
             reported = self._onboard(t, k, tau, onboard)
+            truth.onboard = True
         sample = self._telemetry(k, t, measured, outputs, reported)
         fate = self.impairment.fate(UPLINK, k)
         if not fate:
@@ -240,7 +242,7 @@ class Simulation:
             u = max(u, low)
         if high is not None:
             u = min(u, high)
-        self._push(t + tau, self._apply, k, u)
+        self._push(t + tau, self._apply, k, u, True)
         return u
 
     def _telemetry(self, k: int, t: float, measured: list[float], outputs: Outputs, reported: float) -> Sample:
@@ -266,14 +268,16 @@ class Simulation:
         self.stats.samples["sent"] += 1
         self.sink.send_sample(sample)
 
-    def _apply(self, t: float, k: int, u: float) -> None:
+    def _apply(self, t: float, k: int, u: float, onboard: bool = False) -> None:
+        """Command ``u`` for sample ``k`` acts at ``t``; ``onboard``: the vehicle's own, not a received command."""
         if k <= self.last_applied:
             self._count("stale")
             return
         self.airframe.advance_to(t)
         self.airframe.command(u)
         self.last_applied = k
-        self._count("applied")
+        if not onboard:  # the command counters are about what was received
+            self._count("applied")
         tau = t - k * self.h
         self.stats.tau.append(tau)
         if k in self._pending:
@@ -285,7 +289,8 @@ class Simulation:
         if truth is None:
             return
         payload = truth.payload(self.sysid, self.airframe.target, self.unit)
-        self.stats.samples[payload["status"]] += 1
+        # a sample flown on board was answered by nobody: counting it "in time" would credit a monitor
+        self.stats.samples["onboard" if truth.onboard else payload["status"]] += 1
         self.sink.publish_truth(payload)
 
     def _heartbeat(self, t: float) -> None:

@@ -59,7 +59,8 @@ class RunStats:
             "sim-vehicle summary",
             f"  samples: taken {s['taken']}, sent {s['sent']}, dropped by link {s['dropped']}, "
             f"duplicated {s['duplicated']}, reordered {s['reordered']}",
-            f"  per sample: answered in time {s['applied']}, late {s['late']}, lost (never answered) {s['lost']}",
+            f"  per sample: answered in time {s['applied']}, late {s['late']}, lost (never answered) {s['lost']}, "
+            f"flown on board (autopilot/excitation) {s['onboard']}",
             f"  commands: received {c['received']}, applied {c['applied']}, late {c['late']}, "
             f"stale/duplicate {c['stale']}, dropped by link {c['dropped']}, for a future sample {c['future']}, "
             f"other system {c['foreign_target']}, ignored while flying on board (autopilot/excitation) "

@@ -185,3 +185,15 @@ def test_autopilot_reports_its_own_command_and_applies_it_after_the_drawn_delay(
     applied = [t for t in rec.truth if t["status"] == "applied"]
     assert len(applied) == 30 and all(0.0 <= t["tau"] <= 0.4 + 1e-9 for t in applied)
     assert [t["tau"] for t in applied[:5]] == pytest.approx([t["tau_drawn"] for t in applied[:5]])
+
+
+def test_an_autopilot_flight_counts_its_samples_as_flown_on_board_not_answered():
+    rec = Recorder()
+    sim = Simulation(PLANT, rec, steps=40, delay=parse_delay_spec("uniform:0:0.46", seed=2),
+                     autopilot=np.array([[-0.5]]))
+    fly(sim, rec)  # the test-side controller answers too: the vehicle ignores it while it flies itself
+    s, c = sim.stats.samples, sim.stats.commands
+    assert s["onboard"] == 40 and s["applied"] == 0 and s["late"] == 0 and s["lost"] == 0
+    assert c["received"] == c["ignored_autopilot"] > 0 and c["applied"] == 0
+    summary = sim.stats.summary()
+    assert "answered in time 0" in summary and "flown on board (autopilot/excitation) 40" in summary
