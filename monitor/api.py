@@ -162,16 +162,25 @@ class SimulatedRun(Trace):
 
 
 def simulate(plant: Plant, gains: Gains, steps: int = 100, fault: str = "bias:2@20", delay: str | None = None,
-             wind: str = "paper", seed: int = 0) -> SimulatedRun:
+             wind: str = "paper", seed: int = 0, rrd: str | Path | None = None) -> SimulatedRun:
     """Simulate plant + observer + controller (no network) with the contract's fault/delay/wind SPECs.
 
     ``delay`` defaults to uniform over the plant's interval. The same model as ``demo --runs``: the exact
-    ``B0(tau(k))`` each sample, the monitor's own estimator, the actuator limit of the plant.
+    ``B0(tau(k))`` each sample, the monitor's own estimator, the actuator limit of the plant. With ``rrd``
+    the run is also written as a recording, as ``fault-monitor run`` writes one (``report``, ``replay``,
+    ``rerun FILE.rrd`` read it).
     """
+    from contextlib import nullcontext
+
     from monitor.demo.montecarlo import run_scenario
+    from monitor.demo.sim_recording import simulated_recording
 
     delay_spec = delay or f"uniform:{plant.tau_min}:{plant.tau_max}"
-    trace, sc = run_scenario(plant, gains, steps, fault, delay_spec, wind, seed)
+    scenario = f"fault {fault}, delay {delay_spec}, wind {wind}, seed {seed}, {steps} samples"
+    recording = (simulated_recording(rrd, plant, gains, "given to simulate", scenario)
+                 if rrd is not None else nullcontext(None))
+    with recording as on_sample:
+        trace, sc = run_scenario(plant, gains, steps, fault, delay_spec, wind, seed, on_sample)
     return SimulatedRun(**{f.name: getattr(trace, f.name) for f in fields(Trace)}, settling_steps=sc.settling_steps,
                         rms_ef=sc.rms_ef, peak_alpha_after=sc.peak_alpha_after)
 

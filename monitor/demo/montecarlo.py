@@ -15,6 +15,7 @@ the two tables could not be compared. A rate-limited actuator is refused: only `
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,8 +58,13 @@ def actuator(plant: Plant, u: np.ndarray) -> np.ndarray:
     return np.clip(u, -limit, limit) if limit is not None else u
 
 
-def simulate(plant: Plant, gains: Gains, steps: int, fault, delay, wind_values) -> Trace:
-    """Step plant + observer + controller for ``steps`` samples with delay ``delay.tau(k)`` each sample."""
+def simulate(plant: Plant, gains: Gains, steps: int, fault, delay, wind_values,
+             on_sample: Callable[..., None] | None = None) -> Trace:
+    """Step plant + observer + controller for ``steps`` samples with delay ``delay.tau(k)`` each sample.
+
+    ``on_sample(k, x, y, step, u, tau, f, d)``, when given, sees every sample (``api.simulate(rrd=...)``
+    records them as the live monitor would).
+    """
     if not fault.additive_only:
         raise UserError("the Monte-Carlo mode simulates additive faults only (bias, ramp); loe/stuck need sim-vehicle")
     if plant.actuator.rate_limit is not None:
@@ -74,8 +80,11 @@ def simulate(plant: Plant, gains: Gains, steps: int, fault, delay, wind_values) 
         f = np.array(fault.f_vector(k, plant.q))
         d = np.array([next(wind_values)] + [0.0] * (plant.p - 1))
         tau = min(max(float(delay.tau(k)), 0.0), tau_hi)
-        step = est.step(state, k, plant.C @ x)
+        y = plant.C @ x
+        step = est.step(state, k, y)
         u = actuator(plant, step.u)
+        if on_sample is not None:
+            on_sample(k, x, y, step, u, tau, f, d)
         B0t = b0_of_tau(plant, tau)
         out["f"][k], out["f_hat"][k], out["u"][k], out["tau"][k] = f[0], step.f_hat[0], u[0], tau
         out["alpha"][k], out["q"][k] = x[0], x[1] if plant.n > 1 else 0.0
@@ -96,14 +105,14 @@ def score(trace: Trace, onset: int, size: float) -> Score:
 
 
 def run_scenario(plant: Plant, gains: Gains, steps: int, fault_spec: str, delay_spec: str, wind_spec: str,
-                 seed: int) -> tuple[Trace, Score]:
+                 seed: int, on_sample: Callable[..., None] | None = None) -> tuple[Trace, Score]:
     """One run of the scenario given as the contract's SPECs (delay and wind drawn with ``seed``), and its score."""
     from monitor.wire.specs import parse_delay_spec, parse_fault_spec
     from sim_vehicle.wind import parse_wind_spec
 
     fault = parse_fault_spec(fault_spec)
     wind = parse_wind_spec(wind_spec, plant.h, seed)
-    trace = simulate(plant, gains, steps, fault, parse_delay_spec(delay_spec, seed), wind.values())
+    trace = simulate(plant, gains, steps, fault, parse_delay_spec(delay_spec, seed), wind.values(), on_sample)
     onset = fault.onset
     return trace, score(trace, onset if onset is not None else steps, fault.f(onset) if onset is not None else 0.0)
 
