@@ -9,24 +9,26 @@ import sys
 
 import pytest
 
-from monitor.cli import COMMANDS
-
-PROGRAMS = [("monitor", [c]) for c in COMMANDS] + [("monitor", []), ("sim_vehicle", []), ("sim_vehicle", ["run"])]
+ENTRY_POINTS = [("monitor", []), ("sim_vehicle", []), ("sim_vehicle", ["run"]), ("monitor", ["design"])]
 
 
-@pytest.mark.parametrize("module, argv", PROGRAMS, ids=lambda v: v if isinstance(v, str) else " ".join(v) or "-")
-def test_help_is_there_and_its_defaults_are_not_doubled_or_empty(module, argv):
-    proc = subprocess.run([sys.executable, "-m", module, *argv, "--help"], capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 0, proc.stderr
-    text = proc.stdout
+def _check_help(text: str, what: str) -> None:
     assert text.startswith("usage:")
     description = text.split("\n\n")[1] if "\n\n" in text else ""
     assert len(description.split()) >= 5, f"no description under the usage line:\n{text[:400]}"
     for empty in ("(default: None)", "(default: [])", "(default: True)", "(default: False)", "(default: )"):
-        assert empty not in text, f"{empty} in the help of {module} {' '.join(argv)}"
+        assert empty not in text, f"{empty} in the help of {what}"
     options = re.split(r"\n  (?=-)", text.split("options:", 1)[-1])
     for block in options:
         assert len(re.findall(r"\(default", block)) <= 1, f"default given twice: {block[:160]}"
+
+
+@pytest.mark.parametrize("module, argv", ENTRY_POINTS, ids=lambda v: v if isinstance(v, str) else " ".join(v) or "-")
+def test_help_runs_from_the_entry_points(module, argv):
+    """The programs as a user starts them (each other command's help is checked in process, below: same parsers)."""
+    proc = subprocess.run([sys.executable, "-m", module, *argv, "--help"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    _check_help(proc.stdout, f"{module} {' '.join(argv)}")
 
 
 def _parsers():
@@ -52,6 +54,11 @@ def _subcommand_lines():
 @pytest.mark.parametrize("prog, name, line", list(_subcommand_lines()), ids=lambda v: v if isinstance(v, str) and " " not in v else "")
 def test_every_subcommand_says_in_one_line_what_it_is_for(prog, name, line):
     assert line and len(line.split()) >= 6 and len(line) <= 110, f"{prog} {name}: {line!r}"
+
+
+@pytest.mark.parametrize("name, parser", list(_parsers()), ids=lambda v: v if isinstance(v, str) else "")
+def test_every_help_says_what_it_is_for_and_shows_each_default_once(name, parser):
+    _check_help(parser.format_help(), name)
 
 
 @pytest.mark.parametrize("name, parser", list(_parsers()), ids=lambda v: v if isinstance(v, str) else "")

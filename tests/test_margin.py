@@ -5,13 +5,10 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-import warnings
 from importlib import resources
 
 import pytest
 
-from monitor.design import run_design
-from monitor.errors import DesignFailed
 from monitor.gains import read_gains
 from monitor.model.plant import load_plant, with_tau_max
 from monitor.checks.verify import verify_gains
@@ -62,17 +59,16 @@ def test_gains_at_the_margin_are_stable_over_the_whole_interval_and_a_wider_one_
 
 
 def test_beyond_the_margin_the_design_finds_no_certificate(margin_run):
-    """Beyond the margin of the objective margin used (fast, its default), that objective finds no certificate.
+    """The bisection's own failed probe lies within the tolerance above the margin (0.02 s here).
 
+    Beyond the margin of the objective margin used (fast, its default), that objective finds no certificate.
     The default design (no objective named) would fall back to the H-infinity objective there, whose own
     margin may be wider: the margin is per objective, as `margin --objective` says.
     """
-    d, doc, _ = margin_run
+    _, doc, _ = margin_run
     assert doc["objective"] == "fast"
-    wider = with_tau_max(load_plant(d / "plant.toml"), doc["tau_max"] + 2 * 0.02)
-    with pytest.raises(DesignFailed), warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        run_design("certified", wider, objective="fast")
+    assert doc["no_certificate_at"] is not None
+    assert doc["tau_max"] < doc["no_certificate_at"] <= doc["tau_max"] + 0.02 + 1e-12
 
 
 def test_gamma_e_grows_with_the_delay_interval(margin_run):

@@ -28,6 +28,7 @@ class Margin:
     plant: Plant  # the plant with that bound
     curve: list[dict[str, float]] = field(default_factory=list)  # {"tau_max", "gamma_e"}, increasing tau_max
     probes: int = 0
+    no_certificate_at: float | None = None  # the smallest probed tau_max without a certificate (None: none failed)
 
 
 def _try(plant: Plant, tau_max: float, options: dict) -> tuple[Plant, DesignResult | None]:
@@ -76,4 +77,6 @@ def delay_margin(plant: Plant, tolerance: float | None = None, curve_points: int
         if result is not None:
             curve.append({"tau_max": float(t), "gamma_e": float(result.gamma_e)})
             say(f"curve: tau_max = {t:.4f} s, gamma_e = {result.gamma_e:.4f}")
-    return Margin(tau_max=float(lo), design=lo_design, plant=lo_plant, curve=curve, probes=probes)
+    failed_at = float(hi) if hi_design is None else None
+    return Margin(tau_max=float(lo), design=lo_design, plant=lo_plant, curve=curve, probes=probes,
+                  no_certificate_at=failed_at)

@@ -26,7 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="stop bisecting when the bracket is narrower than S seconds (default: h/200)")
     parser.add_argument("--points", type=int, default=6, metavar="N", help="points of the gamma_e curve (default: 6)")
     parser.add_argument("--json", action="store_true",
-                        help='print {"tau_max": ..., "curve": [{"tau_max": ..., "gamma_e": ...}, ...]} on stdout')
+                        help='print {"tau_max": ..., "curve": [{"tau_max": ..., "gamma_e": ...}, ...], "no_certificate_at": '
+                             '(the probe above the margin that failed), ...} on stdout')
     parser.add_argument("--out", metavar="GAINS.toml", help="write the gains designed at the margin")
     parser.add_argument("--png", metavar="FILE", help="plot gamma_e against tau_max")
     parser.set_defaults(func=run)
@@ -53,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
         _plot(margin, args.png, plant)
     doc = {"tau_max": margin.tau_max, "curve": margin.curve, "h": plant.h, "tau_min": plant.tau_min,
            "objective": args.objective, "gamma_e_at_margin": margin.design.gamma_e, "probes": margin.probes,
+           "no_certificate_at": margin.no_certificate_at,
            "plant_interval": [plant.tau_min, plant.tau_max]}
     if args.json:
         print(json.dumps(doc))

@@ -1,9 +1,9 @@
 """`fault-monitor demo --aircraft c172p` end to end: a real identification flight on JSBSim, identify, design,
 and the closed loop flown live with real daemons, judged from the recording against the truth stream.
 
-Reduced to what the suite can afford (the certified design on the longitudinal model, 31 s after
-onset): f_hat within 5 % of the 2 deg bias from 1 s after onset to the table's late window, 30 s after it. The
-minute after onset is judged by tests/e2e/test_aircraft_chain.py, through MAVProxy.
+Reduced to what the suite can afford (the certified design on the longitudinal model, 11 s after onset): f_hat
+within 5 % of the 2 deg bias from 1 s after onset to the end. The minute after onset is judged by
+tests/e2e/test_aircraft_chain.py, through MAVProxy; the table's late window by tests/test_demo_units.py.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from monitor.model.plant import load_plant
 
 RATE = 20
 ONSET = 100  # 5 s in: the demo's default at 20 Hz
-STEPS = ONSET + 31 * RATE
+STEPS = ONSET + 11 * RATE
 BIAS = 2.0
 
 
@@ -49,16 +49,15 @@ def test_aircraft_demo_identifies_designs_and_flies_the_fault_live(tmp_path: Pat
     (series,) = read_recording(out / "longitudinal-certified.rrd").vehicles.values()
     f_hat = {r.k: float(np.ravel(r.f_hat)[0]) for r in series.samples}
     truth = {r.k: float(r.f[0]) for r in series.truth if r.f}
-    judged = [k for k in range(ONSET + RATE, ONSET + 30 * RATE + 1) if k in f_hat and k in truth]
-    assert len(judged) >= 0.95 * 29 * RATE, f"only {len(judged)} samples to judge"
+    judged = [k for k in range(ONSET + RATE, STEPS) if k in f_hat and k in truth]
+    assert len(judged) >= 0.95 * (STEPS - ONSET - RATE), f"only {len(judged)} samples to judge"
     assert all(abs(truth[k] - BIAS) < 1e-9 for k in judged), "the truth stream's fault is not the demo's bias"
     errors = np.array([f_hat[k] - truth[k] for k in judged])
     assert np.max(np.abs(errors)) <= 0.05 * BIAS, f"|f_hat - f| up to {np.max(np.abs(errors)):.3f} deg"
 
-    # the table's late window is the recording's, and the alpha hold is a deviation from trim
-    late = [k for k in judged if ONSET + 29 * RATE < k <= ONSET + 30 * RATE]
-    assert abs(row["ef_late"] - np.mean([abs(f_hat[k] - truth[k]) for k in late])) < 1e-9
-    assert abs(row["alpha_late"]) < 0.2, row["alpha_late"]
+    # a run shorter than the late window says so ("-"), it does not make a figure up
+    assert row["ef_late"] is None and row["alpha_late"] is None
+    assert abs(row["rms_alpha_after"]) < 1.0 and row["false_alarms"] == 0
     for name in ("identification.png", "longitudinal/fig3_fault_estimate.png"):
         data = (out / name).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
