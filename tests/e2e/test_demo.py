@@ -44,11 +44,9 @@ def test_live_demo_table_comes_from_the_run(out):
     assert " INFO " in monitor_log and "ready:" in monitor_log and "alarm raised" in monitor_log
     assert " INFO " in (out / "logs" / "certified-sim.log").read_text()
 
-    second = demo(out, "--methods", "certified", "--steps", "40", "--speedup", "20", "--fault", "bias:1@15")
-    row2 = second["rows"][0]
-    assert row2["rms_ef"] != pytest.approx(row["rms_ef"])  # a different fault gives different figures
-    assert row2["peak_alpha_after"] < row["peak_alpha_after"]  # half the fault, smaller excursion
-    assert analyse(load_recording(rrd), fault_spec="bias:1@15")["onset_k"] == 15
+    # the vehicle flew the fault asked for, not the demo's default (bias:2@20): the recorded truth says so
+    (series,) = load_recording(rrd).vehicles.values()
+    assert min(t.k for t in series.truth if t.f and t.f[0] != 0.0) == 10
 
 
 def test_monte_carlo_mode_depends_on_the_seed_and_keeps_the_live_summary(out):
