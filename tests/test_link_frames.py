@@ -11,7 +11,7 @@ from monitor.link.frames import FrameCounters, FrameEncoder, FrameParser
 from monitor.link.outgoing import alarm_text_frame, command_frame, fhat_frames, heartbeat_frame
 from monitor.link.signals import default_signal_map
 from monitor.link.signing import Signer
-from monitor.wire.mavlink import mavlink, new_codec
+from monitor.wire.mavlink import FrameSink, mavlink, new_codec
 
 KEY = bytes(range(32))
 
@@ -50,24 +50,11 @@ def _reference(frames_bytes: list[bytes]) -> list[tuple]:
     return out
 
 
-class _Sink:
-    def __init__(self) -> None:
-        self.buffer = bytearray()
-
-    def write(self, data: bytes) -> None:
-        self.buffer += data
-
-    def take(self) -> bytes:
-        out = bytes(self.buffer)
-        self.buffer.clear()
-        return out
-
-
 def _v1_codec(sysid: int, compid: int = 1):
     """pymavlink's MAVLink 1 encoder (its v1 dialect module: base fields only, no truncation, no signing)."""
     from pymavlink.dialects.v10 import ardupilotmega as v1
 
-    return v1, v1.MAVLink(_Sink(), srcSystem=sysid, srcComponent=compid)
+    return v1, v1.MAVLink(FrameSink(), srcSystem=sysid, srcComponent=compid)
 
 
 def _telemetry_v1(k: int, sysid: int = 4) -> list[bytes]:

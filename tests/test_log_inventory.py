@@ -18,16 +18,9 @@ from monitor.cli import main
 from monitor.link.log_inventory import explain_missing, read_inventory
 from monitor.link.signals import default_signal_map
 from monitor.wire.mavlink import mavlink, new_codec
+from tests.test_link_transports import V1_SIGNALS
 
-V1_MAP = """
-[signals]
-instant = "SERVO_OUTPUT_RAW"
-outputs = ["alpha"]
-actuator = ["elevator"]
-[signals.measured]
-alpha = { field = "ATTITUDE.pitch", scale = 57.29577951308232, unit = "deg" }
-elevator = { field = "SERVO_OUTPUT_RAW.servo2_raw", scale = 0.06, offset = -90.0, unit = "deg" }
-"""
+V1_MAP = V1_SIGNALS  # one map of a MAVLink 1 log's own messages for both test modules
 T0_US = 1_700_000_000_000_000
 
 

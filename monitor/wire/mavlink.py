@@ -27,6 +27,7 @@ __all__ = [
     "Sample",
     "Command",
     "new_codec",
+    "FrameSink",
     "enable_signing",
     "encode_sample",
     "encode_command",
@@ -66,7 +67,7 @@ class Command:
     elevator_deg: float
 
 
-class _Sink:
+class FrameSink:
     """A file-like target that keeps the last encoded frame (the codec never owns a socket)."""
 
     def __init__(self) -> None:
@@ -87,7 +88,7 @@ def new_codec(sysid: int, component: int) -> mavlink.MAVLink:
     Robust parsing turns garbage and bad CRCs into ``BAD_DATA`` messages instead of raising once and
     then stalling (which would lose later good frames).
     """
-    mav = mavlink.MAVLink(_Sink(), srcSystem=sysid, srcComponent=component)
+    mav = mavlink.MAVLink(FrameSink(), srcSystem=sysid, srcComponent=component)
     mav.robust_parsing = True
     return mav
 
