@@ -42,8 +42,11 @@ def test_two_vehicles_with_different_faults_in_one_monitor(tmp_path: Path, gains
         estimates = bus.collect("uav/*/fault/estimate")
         with monitor_daemon(tmp_path, gains_file, port, bus, "one") as monitor:
             wait_ready(monitor)
-            with sim_daemon(tmp_path, port, bus, 1, "--fault", "bias:2@10", steps=40) as a, \
-                    sim_daemon(tmp_path, port, bus, 2, "--fault", "bias:-1@15", "--seed", "7", steps=40) as b:
+            # 10x, not 25x: one monitor serves two vehicles while the other xdist worker loads the CPU; at 25x a
+            # 20-ms stall is 0.5 s of simulated delay, past the plant's interval (a CI run settled at 9, not <= 8)
+            with sim_daemon(tmp_path, port, bus, 1, "--fault", "bias:2@10", steps=40, speedup=10) as a, \
+                    sim_daemon(tmp_path, port, bus, 2, "--fault", "bias:-1@15", "--seed", "7", steps=40,
+                               speedup=10) as b:
                 assert a.wait(30) == 0 and b.wait(30) == 0
             wait_for(lambda: len(estimates) >= 80, 5, what="80 estimates")
             assert {key for key, _ in bus.query("uav/*/fault/status")} == {"uav/1/fault/status", "uav/2/fault/status"}
