@@ -10,6 +10,7 @@ import a norm and not the check that is meant to judge them independently.
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg
 
 __all__ = ["norm_factor", "induced_norms", "dual_norms", "contraction", "hinf_norm", "hinf_norms"]
 
@@ -62,22 +63,51 @@ def hinf_norms(A: np.ndarray, B: np.ndarray, outputs: list[np.ndarray], points: 
     sweep step. Batched calls instead of a scalar search's ~30 single-frequency solves: the design searches
     call this thousands of times.
     """
-    if np.max(np.abs(np.linalg.eigvals(A))) >= 1.0:
+    T, Z = scipy.linalg.schur(np.asarray(A, dtype=complex), output="complex")
+    poles = np.diag(T)
+    if np.max(np.abs(poles)) >= 1.0:
         return [float("inf")] * len(outputs)
     n = A.shape[0]
+    Bt = Z.conj().T @ B
+    upper = [T[i, i + 1:] for i in range(n)]
 
     def resolvent(omega: np.ndarray) -> np.ndarray:
+        """``(e^{jw} I - A)^-1 B`` in Schur coordinates (times Z^H): a triangular solve, vectorised over w.
+
+        Why Schur and not ``np.linalg.solve`` per frequency: back substitution on the triangular factor costs
+        n vector operations over the whole grid instead of one LAPACK call per frequency (about 10x faster
+        for the loops here), and unlike an eigendecomposition it stays exact for defective matrices (a
+        deadbeat observer's nilpotent block).
+        """
         z = np.exp(1j * np.atleast_1d(omega))
-        return np.linalg.solve(z[:, None, None] * np.eye(n) - A, np.broadcast_to(B, (z.size, *B.shape)))
+        X = np.empty((n, z.size, Bt.shape[1]), dtype=complex)  # state index first: X[i + 1:] is contiguous
+        for i in range(n - 1, -1, -1):
+            acc = Bt[i] + np.tensordot(upper[i], X[i + 1:], axes=(0, 0)) if i < n - 1 else \
+                np.broadcast_to(Bt[i], (z.size, Bt.shape[1]))
+            X[i] = acc / (z - poles[i])[:, None]
+        return X
+
+    rotated = [np.asarray(C) @ Z for C in outputs]
 
     def gain(C: np.ndarray, R: np.ndarray) -> np.ndarray:
-        return np.linalg.svd(C @ R, compute_uv=False)[:, 0]
+        """Largest singular value of ``C R`` per frequency, in closed form for one or two columns or rows."""
+        G = np.tensordot(C, R, axes=(1, 0)).transpose(1, 0, 2)  # (frequencies, outputs, inputs)
+        if G.shape[1] < G.shape[2]:
+            G = G.conj().transpose(0, 2, 1)  # same singular values, fewer columns
+        if G.shape[2] == 1:
+            return np.sqrt(np.sum(np.abs(G[:, :, 0]) ** 2, axis=1))
+        if G.shape[2] == 2:  # the largest eigenvalue of the 2 x 2 Gram matrix G^H G
+            a = np.sum(np.abs(G[:, :, 0]) ** 2, axis=1)
+            d = np.sum(np.abs(G[:, :, 1]) ** 2, axis=1)
+            b = np.sum(G[:, :, 0].conj() * G[:, :, 1], axis=1)
+            return np.sqrt(0.5 * (a + d) + np.sqrt(0.25 * (a - d) ** 2 + np.abs(b) ** 2))
+        return np.linalg.svd(G, compute_uv=False)[:, 0]
 
     omegas = np.concatenate([np.linspace(0.0, np.pi, points), np.geomspace(1e-5, 1e-1, 200)])
     sweep = resolvent(omegas)
     step = np.pi / (points - 1)
     norms = []
-    for C in outputs:
+    for C in rotated:
         values = gain(C, sweep)
         i = int(np.argmax(values))
         best = float(values[i])
