@@ -11,7 +11,7 @@ from monitor.model.closed_loop import Gains, closed_loop, observer_indices
 from monitor.design import run_design
 from monitor.design.paper import lemma3_K2_K3
 from monitor.errors import DesignFailed
-from monitor.model.plant import parse_plant
+from monitor.model.plant import load_plant, parse_plant
 from monitor.checks.verify import verify_gains
 from tests.designs import designed
 
@@ -124,3 +124,49 @@ def test_robust_separate_design_is_a_stable_baseline(preset):
     assert "not the real loop" in result.bounds_apply_to
     _, nominal = designed(preset, "separate")
     assert not verify_gains(plant, nominal.gains).stable
+
+
+WIDE_INTERVAL_PLANT = """
+form = "continuous"
+name = "unstable-pitch-wide"
+h = 1.0
+tau_min = 0.0
+tau_max = 0.6
+A_c = [[0.6, 1.0], [0.0, -3.0]]
+B_c = [[0.0], [2.0]]
+D_cf = [[0.0], [1.0]]
+D_cd = [[0.5], [1.0]]
+C = [[1.0, 0.0]]
+"""
+
+
+def test_the_default_falls_back_to_hinf_where_fast_finds_no_certificate(tmp_path):
+    """An unstable plant over [0, 0.6 h]: the fast objective fails, the default design is still certified."""
+    plant = parse_plant(WIDE_INTERVAL_PLANT, "wide")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = run_design("certified", plant)
+    assert result.objective == "hinf" and "fell back to the H-infinity objective" in result.notes[0]
+    assert "the fast objective failed (fast design: no common Lyapunov certificate" in result.notes[0]
+    v = verify_gains(plant, result.gains, result.certificate, result.gamma_e, result.gamma_z)
+    assert v.stable and v.certificate_valid is True
+
+
+def test_the_fallback_stops_at_its_budget_with_a_certified_candidate(monkeypatch):
+    """With its budget spent the H-infinity fallback keeps the first certified candidate: quick, still certified."""
+    import monitor.design as design
+    import monitor.design.fast as fast
+
+    def no_certificate(plant, **options):
+        raise DesignFailed("fast design: no common Lyapunov certificate (as on a plant where it fails)")
+
+    monkeypatch.setattr(fast, "design_fast", no_certificate)
+    monkeypatch.setattr(design, "FALLBACK_BUDGET_S", 0.0)
+    plant = load_plant("paper-continuous")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = run_design("certified", plant)
+    assert result.objective == "hinf" and "stopped at its 0-s budget" in result.notes[-1]
+    assert "1 controller candidates evaluated" in result.notes[-1]
+    v = verify_gains(plant, result.gains, result.certificate, result.gamma_e, result.gamma_z)
+    assert v.stable and v.certificate_valid is True
