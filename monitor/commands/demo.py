@@ -19,7 +19,11 @@ def register(sub: argparse._SubParsersAction) -> None:
             "`fault-monitor replay FILE.rrd`), DIR/*.png (the paper's Figs. 3-5), DIR/summary.json and the\n"
             "daemons' INFO logs in DIR/logs/. With --runs N: a Monte-Carlo over N delay seeds instead, simulation\n"
             "only (no network, the live vehicle's actuator limit), written to DIR/montecarlo.json; the live run's\n"
-            "summary.json is left alone."
+            "summary.json is left alone.\n\n"
+            "With --aircraft NAME: the same comparison on a JSBSim aircraft. An identification flight (--excite) is\n"
+            "logged to DIR/identification/flight.tlog, a short-period and a longitudinal model are identified from\n"
+            "it, and every design for each is flown live at 3x with the fault and the delay; the table adds the\n"
+            "model and |e_f| and alpha 30 s after onset (default DIR: demo-aircraft)."
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
