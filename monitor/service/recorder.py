@@ -109,10 +109,17 @@ class FileSink(StreamWriter):
             self._fail_once("close", f"writer thread still busy after {timeout_s} s")
         self._drain()
         self._update_blueprint(force=True)
-        self._guard("close", self._finish)
+        # Rerun's flush waits for its file writer, and on a full disk that wait had no end (a CI run hung in
+        # close): the footer is written in a helper thread, and close gives up on it after ``timeout_s``
+        finisher = threading.Thread(target=self._guard, args=("close", lambda: self._finish(timeout_s)),
+                                    name=f"close {self.path.name}", daemon=True)
+        finisher.start()
+        finisher.join(timeout_s + 1.0)
+        if finisher.is_alive():
+            self._fail_once("close", f"the file did not close within {timeout_s:g} s (disk full?)")
 
-    def _finish(self) -> None:
-        self._rec.flush()
+    def _finish(self, timeout_s: float) -> None:
+        self._rec.flush(timeout_sec=timeout_s)
         self._rec.disconnect()  # drops the file sink: writes the footer
 
 
