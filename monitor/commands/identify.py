@@ -168,6 +168,11 @@ class IdentifyRequest:
     sysid: int | None = None
     name: str | None = None
 
+    @property
+    def plant_name(self) -> str:
+        """The plant's name: ``name``, or the output file's stem."""
+        return self.name or Path(self.out).stem
+
 
 @dataclass
 class IdentifiedLog:
@@ -181,11 +186,16 @@ class IdentifiedLog:
     flight: FlightLog
     seconds: float
 
+    @property
+    def plant_path(self) -> Path:
+        """The plant file written."""
+        return Path(self.request.out)
+
     def report(self) -> dict[str, Any]:
         """``--json``'s document."""
         r, f = self.request, self.flight
         return {"source_log": str(r.log), "sysid": self.sysid, "model": r.model, "out": str(r.out),
-                "name": r.name or Path(r.out).stem, "tau_max": self.tau_max, "actuator_limit": r.actuator_limit,
+                "name": r.plant_name, "tau_max": self.tau_max, "actuator_limit": r.actuator_limit,
                 **self.result.report(),
                 "log": {"records": f.records, "skipped_bytes": f.skipped_bytes, "truncated": f.truncated,
                         "seconds": round(self.seconds, 3), **f.counters, "inventory": f.inventory.as_dict()}}
@@ -300,7 +310,7 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
     seconds = time.perf_counter() - started
 
     out = Path(req.out)
-    name = req.name or out.stem
+    name = req.plant_name
     custom_limit = req.actuator_limit != DEFAULT_ACTUATOR_LIMIT
     limit_source = ("given with --actuator-limit" if custom_limit else
                     "a safe default: a log shows the deflections flown, not the stops; check them")

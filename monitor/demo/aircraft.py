@@ -35,6 +35,7 @@ import numpy as np
 from monitor.demo.live import Aircraft, Scenario, Daemon
 from monitor.demo.methods import METHODS
 from monitor.errors import UserError
+from sim_vehicle.excitation import Excitation, parse_excite_spec
 
 if TYPE_CHECKING:
     from monitor.commands.identify import IdentifiedLog
@@ -62,29 +63,18 @@ class AircraftDemoOptions:
 
 
 @dataclass
-class _Identified:
-    model: str
-    plant_path: Path
-    done: IdentifiedLog
-
-
-@dataclass
 class _ModelRuns:
     designed: dict[str, Designed] = field(default_factory=dict)
     failed: dict[str, FailedDesign] = field(default_factory=dict)
     flown: dict[str, Flown] = field(default_factory=dict)
 
 
-def _excite_seconds(spec: str) -> float:
-    """The manoeuvre's length from ``prbs:AMP:SECONDS`` (the vehicle checks the rest of the SPEC)."""
-    parts = spec.split(":")
-    try:
-        seconds = float(parts[2]) if len(parts) == 3 and parts[0] == "prbs" else float("nan")
-    except ValueError:
-        seconds = float("nan")
-    if not seconds > 0:
-        raise UserError(f"--excite '{spec}': expected prbs:AMP:SECONDS, e.g. prbs:1:60")
-    return seconds
+def _excitation(spec: str) -> Excitation:
+    """The manoeuvre, parsed by the vehicle's own reader of ``--excite`` (the demo needs one: not ``none``)."""
+    excitation = parse_excite_spec(spec)
+    if excitation is None:
+        raise UserError(f"--excite '{spec}': the aircraft demo identifies from a manoeuvre, e.g. prbs:1:60")
+    return excitation
 
 
 def record_identification_flight(aircraft: Aircraft, excite: str, seed: int, speedup: float, tlog: Path,
@@ -96,7 +86,7 @@ def record_identification_flight(aircraft: Aircraft, excite: str, seed: int, spe
     """
     from monitor.link.tlog import TlogWriter
 
-    steps = round((_excite_seconds(excite) + LEAD_S) * aircraft.rate)
+    steps = _excitation(excite).samples(1.0 / aircraft.rate) + round(LEAD_S * aircraft.rate)
     tlog.parent.mkdir(parents=True, exist_ok=True)
     log_dir.mkdir(parents=True, exist_ok=True)
     partial = tlog.with_suffix(".partial")
@@ -160,40 +150,32 @@ def _identification_log(opt: AircraftDemoOptions, progress: Progress) -> Path:
     return tlog
 
 
-def _identify_models(opt: AircraftDemoOptions, tlog: Path, progress: Progress) -> dict[str, _Identified]:
+def _identify_models(opt: AircraftDemoOptions, tlog: Path, progress: Progress) -> dict[str, IdentifiedLog]:
     from monitor.commands.identify import IdentifyRequest, identify_log
 
     sc = opt.scenario
-    out: dict[str, _Identified] = {}
+    out: dict[str, IdentifiedLog] = {}
     for model in opt.models:
         path = Path(opt.out) / "plants" / f"{sc.aircraft.name}-{model}.toml"
         done = identify_log(IdentifyRequest(log=str(tlog), out=str(path), model=model))
         fits = ", ".join(f"{s} {f:.1f} %" for s, f in done.result.fit_validation.items())
         progress(f"{model:<28} identified: held-out fit {fits} -> {path}", final=True)
-        out[model] = _Identified(model, path, done)
+        out[model] = done
     return out
 
 
 def _fly(model: str, d: Designed, scenario: Scenario, trim: tuple[float, float], out: Path,
          progress: Callable[..., None]) -> Flown:
-    """One design for one model flown live; its row is scored from the recording, with the late window."""
-    from monitor.demo.live import run_live
-    from monitor.demo.orchestrate import Flown
-    from monitor.demo.report import late_window, row_from_recording
+    """One design for one model flown live (the paper demo's ``fly_live``), its row with the late window."""
+    from monitor.demo.orchestrate import fly_live
+    from monitor.demo.report import late_window
     from monitor.wire.specs import parse_fault_spec
 
-    label = f"{model}-{d.method}"
-    live = run_live(label, Path(d.gains.source), scenario, out, progress)
-    progress(f"{label:<28} live: {len(live.estimates)} estimates over Zenoh in {live.wall_seconds:.1f} s",
-             final=True)
-    row, trace = row_from_recording(d.method, live.rrd, scenario.fault, d.stable, d.certificate,
-                                    d.claim("gamma_e"), d.claim("gamma_z"), trim)
-    row.model = model
-    row.ef_late, row.alpha_late = late_window(trace, parse_fault_spec(scenario.fault).onset, scenario.aircraft.rate,
-                                              LATE_S)
-    run = {"rrd": str(live.rrd), "zenoh_estimates": len(live.estimates), "zenoh_truth": len(live.truth),
-           "wall_seconds": round(live.wall_seconds, 2), "sim_exit": live.sim_exit, "monitor_exit": live.monitor_exit}
-    return Flown(row, trace, run)
+    flown = fly_live(d, scenario, out, progress, label=f"{model}-{d.method}", trim=trim)
+    flown.row.model = model
+    flown.row.ef_late, flown.row.alpha_late = late_window(flown.trace, parse_fault_spec(scenario.fault).onset,
+                                                          scenario.aircraft.rate, LATE_S)
+    return flown
 
 
 def run_aircraft_demo(opt: AircraftDemoOptions, design: DesignFn | None = None) -> int:
@@ -208,7 +190,7 @@ def run_aircraft_demo(opt: AircraftDemoOptions, design: DesignFn | None = None) 
     progress = Progress()
     parse_fault_spec(opt.scenario.fault)  # fail early on a bad SPEC, before any flight
     parse_delay_spec(opt.scenario.delay, opt.scenario.seed)
-    _excite_seconds(opt.excite)
+    _excitation(opt.excite)
     out = Path(opt.out)
     out.mkdir(parents=True, exist_ok=True)
     tlog = _identification_log(opt, progress)
@@ -220,20 +202,20 @@ def run_aircraft_demo(opt: AircraftDemoOptions, design: DesignFn | None = None) 
         r.designed, r.failed = design_all(opt.methods, plant, out / "gains" / model, opt.redesign, progress,
                                           design or default_design)
         scenario = replace(opt.scenario, plant=str(ident.plant_path))
-        op = ident.done.result.operating_point
+        op = ident.result.operating_point
         trim = (op["alpha"], op["q"])
         r.flown = {m: _fly(model, d, scenario, trim, out, progress) for m, d in r.designed.items()}
     _report(opt, identified, runs, tlog, t0)
-    failed = {f"{model}/{m}": f for model, r in runs.items() for m, f in r.failed.items()}
-    # the exit follows the longitudinal model's certified design: the one a user should fly
+    # the exit follows the longitudinal model's certified design: the one a user should fly; conclude warns of
+    # that model's failed baselines, the other model's failures are warned of here
     primary = runs.get("longitudinal") or next(iter(runs.values()))
-    for key, f in failed.items():
-        if f not in primary.failed.values():
-            print(f"fault-monitor demo: WARNING: {key} failed ({f.note})", file=sys.stderr)
+    for model, r in runs.items():
+        for m, f in r.failed.items() if r is not primary else ():
+            print(f"fault-monitor demo: WARNING: {model}/{m} failed ({f.note})", file=sys.stderr)
     return conclude(opt.methods, primary.failed)
 
 
-def _report(opt: AircraftDemoOptions, identified: dict[str, _Identified], runs: dict[str, _ModelRuns], tlog: Path,
+def _report(opt: AircraftDemoOptions, identified: dict[str, IdentifiedLog], runs: dict[str, _ModelRuns], tlog: Path,
             t0: float) -> None:
     """The table, the figures (per model, and the identification's), and summary.json."""
     from monitor.demo.orchestrate import json_default
@@ -249,7 +231,7 @@ def _report(opt: AircraftDemoOptions, identified: dict[str, _Identified], runs: 
     figures = _figures(opt, identified, runs, subtitle) if opt.figures else []
     print(f"\nJSBSim {ac.name}, live over MAVLink/UDP + Zenoh ({subtitle}; {sc.steps} samples at {sc.speedup:g}x)\n")
     for model, ident in identified.items():
-        res = ident.done.result
+        res = ident.result
         fits = ", ".join(f"{s} {f:.1f} %" for s, f in res.fit_validation.items())
         modes = "; ".join(m.describe() for m in res.modes)
         print(f"{model:<13} model: held-out fit {fits}; {modes}")
@@ -267,7 +249,7 @@ def _report(opt: AircraftDemoOptions, identified: dict[str, _Identified], runs: 
     if figures:
         print(f"Figures:    {', '.join(figures)}")
     summary = {"mode": "aircraft", "options": asdict(opt), "rows": [asdict(r) for r in rows],
-               "identification": {m: {"plant": str(i.plant_path), **i.done.report()} for m, i in identified.items()},
+               "identification": {m: {"plant": str(i.plant_path), **i.report()} for m, i in identified.items()},
                "runs": {f"{model}/{m}": f.run for model, r in runs.items() for m, f in r.flown.items()},
                "figures": figures, "late_window_s": LATE_S, "wall_seconds": round(time.monotonic() - t0, 2)}
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=json_default))
@@ -282,7 +264,7 @@ def _lost(flown: Flown) -> bool:
     return not row.stable or row.rms_ef is None or not row.rms_ef <= max(fault, 1e-9)
 
 
-def _figures(opt: AircraftDemoOptions, identified: dict[str, _Identified], runs: dict[str, _ModelRuns],
+def _figures(opt: AircraftDemoOptions, identified: dict[str, IdentifiedLog], runs: dict[str, _ModelRuns],
              subtitle: str) -> list[str]:
     from monitor.demo.figures import write_figures, write_identification_figure
     from monitor.wire.specs import parse_fault_spec
@@ -291,9 +273,9 @@ def _figures(opt: AircraftDemoOptions, identified: dict[str, _Identified], runs:
     onset = parse_fault_spec(opt.scenario.fault).onset
     h = 1 / opt.scenario.aircraft.rate
     paths = [write_identification_figure(
-        {m: i.done.result.validation_run for m, i in identified.items()},
-        {m: i.done.result.state_names for m, i in identified.items()},
-        {m: i.done.result.fit_validation for m, i in identified.items()}, out / "identification.png", subtitle)]
+        {m: i.result.validation_run for m, i in identified.items()},
+        {m: i.result.state_names for m, i in identified.items()},
+        {m: i.result.fit_validation for m, i in identified.items()}, out / "identification.png", subtitle)]
     for model, r in runs.items():
         if not r.flown:
             continue

@@ -203,17 +203,23 @@ def run_demo(options: DemoOptions, design: DesignFn | None = None, fly: Fly | No
     return conclude(options.methods, failed)
 
 
-def fly_live(designed: Designed, scenario: Scenario, out: Path, progress: Callable[..., None]) -> Flown:
-    """Fly one design with the real daemons; its row is scored from the recording, as ``replay`` would."""
+def fly_live(designed: Designed, scenario: Scenario, out: Path, progress: Callable[..., None],
+             label: str | None = None, trim: tuple[float, float] = (0.0, 0.0)) -> Flown:
+    """Fly one design with the real daemons; its row is scored from the recording, as ``replay`` would.
+
+    ``label`` names the run's files (default: the method); ``trim`` (alpha0, q0) turns the recorded, absolute
+    alpha and q into deviations (a plant identified about a trim).
+    """
     from monitor.demo.live import run_live
     from monitor.demo.report import row_from_recording
 
     m = designed.method
-    live = run_live(m, Path(designed.gains.source), scenario, out, progress)
-    progress(f"{m:<15} live: {len(live.estimates)} estimates over Zenoh in {live.wall_seconds:.1f} s, "
+    name = label or m
+    live = run_live(name, Path(designed.gains.source), scenario, out, progress)
+    progress(f"{name:<15} live: {len(live.estimates)} estimates over Zenoh in {live.wall_seconds:.1f} s, "
              f"recording {live.rrd}", final=True)
     row, trace = row_from_recording(m, live.rrd, scenario.fault, designed.stable, designed.certificate,
-                                    designed.claim("gamma_e"), designed.claim("gamma_z"))
+                                    designed.claim("gamma_e"), designed.claim("gamma_z"), trim)
     run = {"rrd": str(live.rrd), "zenoh_estimates": len(live.estimates), "zenoh_truth": len(live.truth),
            "wall_seconds": round(live.wall_seconds, 2), "sim_exit": live.sim_exit, "monitor_exit": live.monitor_exit}
     return Flown(row, trace, run)

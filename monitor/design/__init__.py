@@ -7,6 +7,7 @@ objectives: ``fast`` (default, ``monitor.design.fast``) and ``hinf`` (the joint 
 
 from __future__ import annotations
 
+import time
 from typing import Callable
 
 from monitor.design.result import DesignResult
@@ -66,8 +67,6 @@ def _fast_or_hinf(plant: Plant, options: dict) -> DesignResult:
     from monitor.design.certified import design_certified
     from monitor.design.fast import design_fast
     from monitor.errors import DesignFailed
-
-    import time
 
     t0 = time.perf_counter()
     try:
