@@ -11,7 +11,7 @@ README's figures sees that it is missing on purpose, not lost.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -117,8 +117,7 @@ def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subt
               reference_label="" if q_steady is None else f"model: q with alpha held at 0 ({q_steady:.2f})"),
     ]
     if not paper:
-        panels = [Panel(p.file, p.field, p.ylabel, p.title.partition(": ")[2], p.truth, p.caption, p.reference,
-                        p.reference_label) for p in panels]
+        panels = [replace(p, title=p.title.partition(": ")[2]) for p in panels]
     paths = []
     for panel in panels:
         fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
