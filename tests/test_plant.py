@@ -61,7 +61,8 @@ C = [[1.0, 0.0]]
         (lambda t: t + "tau_mx = 0.3\n", "tau_mx"),
         (lambda t: t.replace("B_c = [[0.0], [1.0]]", "B_c = [[0.0], [1.0], [2.0]]"), "B_c"),
         (lambda t: t.replace("A_c = [[-1.0, 1.0], [0.0, -2.0]]", "A_c = [[-1.0, nan], [0.0, -2.0]]"), "A_c"),
-        (lambda t: t.replace("tau_max = 0.4", "tau_max = 1.0"), "tau_max"),
+        (lambda t: t.replace("tau_max = 0.4", "tau_max = 3.5"), "tau_max"),  # 4 whole samples: too many parts
+        (lambda t: t.replace("tau_min = 0.0", "tau_min = 0.5"), "tau_min"),  # above tau_max
         (lambda t: t.replace("tau_min = 0.0", "tau_min = -0.1"), "tau_min"),
         (lambda t: t.replace("h = 1.0\n", ""), "h"),
         (lambda t: t.replace("C = [[1.0, 0.0]]", "C = [[1.0, 0.0], [1.0]]"), "C"),

@@ -102,23 +102,32 @@ def observer_indices(plant: Plant) -> tuple[slice, slice, slice, slice]:
 
 
 def closed_loop(plant: Plant, gains: Gains, B0_tau: np.ndarray, steady: tuple[np.ndarray, np.ndarray] | None = None) -> LoopMatrices:
-    """The closed loop when the actual input split is ``B0(tau) = B0_tau`` (observer uses the nominal B0, B1)."""
-    A, C, Df, Dd = plant.A, plant.C, plant.Df, plant.Dd
+    """The closed loop at one uncertain point ``B0_tau`` (observer uses the nominal ``A, B0, B1``).
+
+    The point is ``B0(tau)`` for an ordinary plant and the stack of curve values of a delay past one sample
+    (``monitor.model.delay_model.realization`` turns it into the ``A, B0, B1`` that act). With
+    ``dA, dB0, dB1`` the differences from the nominal, the observer error is driven by
+    ``(dA + dB0 K1 C) x + (dB0 K2 + dB1) u(k-1) - dB0 K3 e_f``; for an ordinary plant ``dA = 0`` and
+    ``dB1 = -dB0``. The constant-fault terms cancel because the steady state is the same at every point.
+    """
+    from monitor.model.delay_model import realization
+
+    C, Df, Dd = plant.C, plant.Df, plant.Dd
     n, m, q, p = plant.n, plant.m, plant.q, plant.p
     L, M, K1, K2, K3 = gains.L, gains.M, gains.K1, gains.K2, gains.K3
     S_x, S_u = steady if steady is not None else steady_state(plant, gains)
-    B1_tau = plant.B0 + plant.B1 - B0_tau
-    Delta = B0_tau - plant.B0
+    A_t, B0_t, B1_t = realization(plant, B0_tau)
+    dA, dB0, dB1 = A_t - plant.A, B0_t - plant.B0, B1_t - plant.B1
     sx, se, sf, su = observer_indices(plant)
     N = 2 * n + q + m
     Acl = np.zeros((N, N))
-    Acl[sx, sx] = A + B0_tau @ K1 @ C
-    Acl[sx, sf] = -B0_tau @ K3
-    Acl[sx, su] = B0_tau @ K2 + B1_tau
-    Acl[se, sx] = Delta @ K1 @ C
-    Acl[se, se] = A - L @ C
-    Acl[se, sf] = Df - Delta @ K3
-    Acl[se, su] = Delta @ (K2 - np.eye(m))
+    Acl[sx, sx] = A_t + B0_t @ K1 @ C
+    Acl[sx, sf] = -B0_t @ K3
+    Acl[sx, su] = B0_t @ K2 + B1_t
+    Acl[se, sx] = dA + dB0 @ K1 @ C
+    Acl[se, se] = plant.A - L @ C
+    Acl[se, sf] = Df - dB0 @ K3
+    Acl[se, su] = dB0 @ K2 + dB1
     Acl[sf, se] = -M @ C
     Acl[sf, sf] = np.eye(q)
     Acl[su, sx] = K1 @ C

@@ -8,18 +8,25 @@ Lyapunov matrix that works at every vertex works for any sequence ``tau(k)``.
 * continuous form: ``B0(tau)`` is exact (``monitor.model.discretize``).
 * discrete form: ``B0(tau) = B0 + F(tau) E`` with the paper's own ``F(tau)`` computed from the
   reconstructed ``A_c = logm(A)/h`` and ``E`` from the file (or the reconstructed ``B_c``).
+* a delay past one sample (``plant.lags``, ``monitor.model.long_delay``): the uncertain "point" is the stack
+  ``[G(a_first); ...; G(a_last)]`` of one curve value per whole-sample part, and ``A`` varies too; the
+  functions here take and return such points, and :func:`realization` turns one into ``(A, B0, B1)``. For an
+  ordinary plant the point is ``B0(tau)`` itself, so every caller stays the same.
 """
 
 from __future__ import annotations
 
+import itertools
 from functools import lru_cache
 
 import numpy as np
 
 from monitor.model.discretize import F_of_tau, b0_b1, delta_exact, delta_lemma1, integral_expm, reconstruct_continuous
+from monitor.model.long_delay import lag_intervals, lag_point, lag_realization
 from monitor.model.plant import ContinuousModel, Plant
 
-__all__ = ["b0_of_tau", "tau_grid", "b0_polytope", "curve_model", "input_sum", "delta_summary"]
+__all__ = ["b0_of_tau", "tau_grid", "b0_polytope", "curve_model", "input_sum", "delta_summary", "lag_curve",
+           "realization", "point_size"]
 
 
 def input_sum(plant: Plant) -> np.ndarray:
@@ -41,8 +48,41 @@ def _E(plant: Plant) -> np.ndarray:
     return plant.E if plant.E is not None else curve_model(plant).B_c
 
 
+@lru_cache(maxsize=32)
+def lag_curve(base: Plant):
+    """``a -> G(a) = int_a^h e^{A_c (h - s)} ds B_c`` for ``a`` in ``[0, h]``: the exact (or reconstructed) curve."""
+    model = curve_model(base)
+    h = base.h
+
+    def curve(a: float) -> np.ndarray:
+        return integral_expm(model.A_c, h - float(a))[1] @ model.B_c
+
+    return curve
+
+
+def point_size(plant: Plant) -> int:
+    """Entries of one uncertain point (a vertex of the certificate's polytope, raveled)."""
+    if plant.lags is None:
+        return plant.B0.size
+    return (plant.lags.last - plant.lags.first + 1) * plant.lags.base.B0.size
+
+
+def realization(plant: Plant, point: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(A, B0, B1)`` that act at one uncertain point: ``(A, B0(tau), B0 + B1 - B0(tau))`` for an ordinary plant."""
+    if plant.lags is None:
+        return plant.A, point, input_sum(plant) - point
+    lags = plant.lags
+    return lag_realization(point, lags.base.A, _whole_interval(lags.base), lags.first, lags.last)
+
+
+@lru_cache(maxsize=32)
+def _whole_interval(base: Plant) -> np.ndarray:
+    return lag_curve(base)(0.0)
+
+
 def b0_of_tau(plant: Plant, tau: float) -> np.ndarray:
-    """``B0(tau)`` for a delay in ``[0, h)``; ``B1(tau)`` is ``input_sum(plant) - B0(tau)``.
+    """``B0(tau)`` for a delay in ``[0, h)``; ``B1(tau)`` is ``input_sum(plant) - B0(tau)``. Past one sample
+    (``plant.lags``): the point of a constant delay ``tau``, ``[G(a_first); ...]``.
 
     Cached per (plant, tau): the design searches ask for the same few delays at every candidate, and each
     costs two matrix exponentials. Plants are immutable and hash by identity; the copy keeps callers from
@@ -53,6 +93,8 @@ def b0_of_tau(plant: Plant, tau: float) -> np.ndarray:
 
 @lru_cache(maxsize=1024)
 def _b0_of_tau(plant: Plant, tau: float) -> np.ndarray:
+    if plant.lags is not None:
+        return lag_point(lag_curve(plant.lags.base), plant.h, plant.tau_min, plant.tau_max, tau)
     if plant.continuous is not None:
         return b0_b1(plant.continuous, plant.h, tau)[0]
     return plant.B0 + F_of_tau(curve_model(plant), plant.h, tau, plant.tau_bar) @ _E(plant)
@@ -65,18 +107,13 @@ def tau_grid(plant: Plant, points: int = 201) -> np.ndarray:
     return np.linspace(plant.tau_min, plant.tau_max, points)
 
 
-def _second_derivative_bound(plant: Plant) -> float:
-    """An upper bound of ``|d^2 B0 / d tau^2|`` over the interval (Frobenius norm).
+def _second_derivative_bound(plant: Plant, lo: float, hi: float, A_c: np.ndarray, B: np.ndarray) -> float:
+    """An upper bound of ``|d^2 B0 / d tau^2|`` over ``[lo, hi]`` (Frobenius norm).
 
     ``dB0/dtau = -e^{A_c (h - tau)} B`` and ``d^2B0/dtau^2 = A_c e^{A_c (h - tau)} B`` with ``B = B_c`` (continuous)
     or ``E`` (discrete); bounded on a fine grid with a 10 % margin for the gaps between grid points.
     """
-    model = curve_model(plant)
-    B = model.B_c if plant.continuous is not None else _E(plant)
-    values = [
-        np.linalg.norm(model.A_c @ integral_expm(model.A_c, plant.h - t)[0] @ B)
-        for t in np.linspace(plant.tau_min, plant.tau_max, 101)
-    ]
+    values = [np.linalg.norm(A_c @ integral_expm(A_c, plant.h - t)[0] @ B) for t in np.linspace(lo, hi, 101)]
     return 1.1 * max(values)
 
 
@@ -87,17 +124,36 @@ def b0_polytope(plant: Plant, segments: int = 8) -> list[np.ndarray]:
     ``r = dtau^2 / 8 * max|B0''|`` of its chord (the interpolation error bound), so the hull of the grid
     points, each blown up into a cross-polytope that contains a ball of radius ``r``, contains it.
     Redundant points are pruned with a convex hull where the dimension allows.
+
+    Past one sample: one such polytope per whole-sample part, over the arrival window ``[lo_j, hi_j]`` of
+    ``G(a_j)``, and the vertices of their product (every part may sit anywhere in its window at once).
     """
-    taus = np.linspace(plant.tau_min, plant.tau_max, segments + 1)
-    points = [b0_of_tau(plant, float(t)).ravel() for t in taus]
+    if plant.lags is None:
+        model = curve_model(plant)
+        B = model.B_c if plant.continuous is not None else _E(plant)
+        return _curve_polytope(plant, lambda t: b0_of_tau(plant, t), plant.tau_min, plant.tau_max, model.A_c, B,
+                               segments)
+    base = plant.lags.base
+    model, curve = curve_model(base), lag_curve(base)
+    parts = [_curve_polytope(base, curve, lo, hi, model.A_c, model.B_c, segments)
+             for lo, hi in lag_intervals(plant.h, plant.tau_min, plant.tau_max)]
+    return [np.vstack(choice) for choice in itertools.product(*parts)]
+
+
+def _curve_polytope(plant: Plant, curve, lo: float, hi: float, A_c: np.ndarray, B: np.ndarray,
+                    segments: int) -> list[np.ndarray]:
+    """The vertices for ``curve`` (``B0`` of a delay) over ``[lo, hi]``: chords blown up by their error bound."""
+    taus = np.linspace(lo, hi, segments + 1)
+    points = [curve(float(t)).ravel() for t in taus]
+    shape = plant.B0.shape
     dim = points[0].size
-    if plant.tau_max == plant.tau_min:
-        return [points[0].reshape(plant.B0.shape)]
-    dtau = (plant.tau_max - plant.tau_min) / segments
-    radius = dtau**2 / 8.0 * _second_derivative_bound(plant) * np.sqrt(dim) * 1.001
+    if hi == lo:
+        return [points[0].reshape(shape)]
+    dtau = (hi - lo) / segments
+    radius = dtau**2 / 8.0 * _second_derivative_bound(plant, lo, hi, A_c, B) * np.sqrt(dim) * 1.001
     cloud = np.array([pt + s * radius * e for pt in points for e in np.eye(dim) for s in (1.0, -1.0)])
     chosen = min((_prune(cloud), _oriented_box(cloud), _oriented_prism(cloud)), key=len)
-    return [v.reshape(plant.B0.shape) for v in chosen]
+    return [v.reshape(shape) for v in chosen]
 
 
 def _oriented_box(cloud: np.ndarray) -> np.ndarray:

@@ -9,8 +9,9 @@ A plant file is TOML in one of two forms (see the README):
   ``B0(tau) = B0 + F E``, ``B1(tau) = B1 - F E``, ``sigma_max(F) <= delta``.
 
 Why be strict: a silently ignored typo in a key (``tau_mx``) would design for the wrong plant, so every
-unknown key, wrong shape, non-finite number or delay outside ``[0, h)`` is a one-line ``UserError``
-naming the key and the file.
+unknown key, wrong shape, non-finite number or negative delay is a one-line ``UserError`` naming the key
+and the file. A delay interval that reaches past h gives a plant with the commands in flight in its state
+(``Lags``, ``monitor.model.long_delay``).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ import numpy as np
 from monitor.errors import UserError
 from monitor.model.discretize import ContinuousModel, discretize
 
-__all__ = ["Plant", "ContinuousModel", "Actuator", "load_plant", "parse_plant", "plant_from_table", "with_tau_max", "preset_names"]
+__all__ = ["Plant", "Lags", "ContinuousModel", "Actuator", "load_plant", "parse_plant", "plant_from_table", "with_tau_max", "preset_names"]
 
 PRESETS = {"paper": "paper.toml", "paper-continuous": "paper-continuous.toml"}
 
@@ -79,6 +80,12 @@ class Plant:
     digest: str = ""
     signals: dict[str, Any] | None = None  # the raw [signals] table (validated by monitor.link.signals)
     raw: dict[str, Any] | None = field(default=None, repr=False)  # the parsed TOML, to derive variants
+    lags: Lags | None = None  # tau_max >= h: the commands in flight are in the state (monitor.model.long_delay)
+
+    @property
+    def physical(self) -> Plant:
+        """The plant without the commands in flight (state x only): what a simulator integrates."""
+        return self.lags.base if self.lags is not None else self
 
     @property
     def tau_bar(self) -> float:
@@ -104,6 +111,20 @@ class Plant:
     @property
     def p(self) -> int:
         return self.Dd.shape[1]
+
+
+@dataclass(frozen=True, eq=False)
+class Lags:
+    """How a plant whose delay reaches past one sample carries its commands in flight.
+
+    ``base`` is the sampled plant on ``x`` alone (its delay curve ``G(a)`` is the ``B0`` of a delay
+    ``a < h``); ``first`` and ``last`` are the whole samples of ``tau_min`` and ``tau_max``. The lagged
+    plant's state is ``[x; u(k-2); ...; u(k-last-1)]`` and its ``A, B0, B1`` are those at the nominal delay.
+    """
+
+    base: Plant
+    first: int
+    last: int
 
 
 def preset_names() -> list[str]:
@@ -167,11 +188,11 @@ def plant_from_table(raw: dict[str, Any], source: str) -> Plant:
     h = reader.scalar("h", positive=True)
     tau_min = reader.scalar("tau_min")
     tau_max = reader.scalar("tau_max")
-    if not 0.0 <= tau_min <= tau_max < h:
-        raise UserError(
-            f"{source}: keys 'tau_min'/'tau_max' must satisfy 0 <= tau_min <= tau_max < h "
-            f"(got {tau_min}, {tau_max}, h = {h})"
-        )
+    if not 0.0 <= tau_min <= tau_max:
+        raise UserError(f"{source}: keys 'tau_min'/'tau_max' must satisfy 0 <= tau_min <= tau_max "
+                        f"(got {tau_min}, {tau_max})")
+    if tau_max >= h:
+        return _lagged_plant(raw, source, h, tau_min, tau_max)
     C = reader.matrix("C")
     n = C.shape[1]
     common: dict[str, Any] = dict(
@@ -209,6 +230,34 @@ def plant_from_table(raw: dict[str, Any], source: str) -> Plant:
     if E is not None and E.shape[0] != n:
         raise UserError(f"{source}: key 'E' must have {n} row(s) (F is n x n, D = I), got {E.shape[0]}")
     return Plant(A=A, B0=B0, B1=B1, Df=Df, Dd=Dd, delta=delta, E=E, **common)
+
+
+def _lagged_plant(raw: dict[str, Any], source: str, h: float, tau_min: float, tau_max: float) -> Plant:
+    """A plant whose delay interval reaches past h: the commands in flight join the state.
+
+    The base is the same file read with a zero delay; its curve ``G(a)`` is exact for the continuous form
+    and that of the reconstructed continuous model for the discrete form (the paper's ``B0 + F E`` is a
+    first-order picture of one interval only). Refused with one line when the interval spans more whole
+    samples than a certificate can enumerate in reasonable time.
+    """
+    from monitor.model.delay_model import lag_curve
+    from monitor.model.long_delay import MAX_LAG_PARTS, lag_point, lag_realization, lag_span, lagged_matrices
+
+    first, last = lag_span(h, tau_min, tau_max)
+    if last - first + 1 > MAX_LAG_PARTS:
+        raise UserError(
+            f"{source}: keys 'tau_min'/'tau_max' = [{tau_min:g}, {tau_max:g}] s span {last - first + 1} whole samples "
+            f"of h = {h:g} s; at most {MAX_LAG_PARTS} can be certified (each multiplies the certificate's vertices): "
+            f"narrow the interval (tau_max - tau_min < {MAX_LAG_PARTS - 1} h always fits)")
+    base = plant_from_table({**raw, "tau_min": 0.0, "tau_max": 0.0}, source)
+    curve = lag_curve(base)
+    nominal = lag_point(curve, h, tau_min, tau_max, 0.5 * (tau_min + tau_max))
+    A, B0, B1 = lag_realization(nominal, base.A, curve(0.0), first, last)
+    C, Df, Dd = lagged_matrices(base.C, base.Df, base.Dd, base.m, last)
+    return Plant(name=base.name, form=base.form, h=h, tau_min=tau_min, tau_max=tau_max, A=A, B0=B0, B1=B1, C=C,
+                 Df=Df, Dd=Dd, unit=base.unit, description=base.description, actuator=base.actuator, source=source,
+                 digest=_digest({k: v for k, v in raw.items() if k not in _NOT_DYNAMICS}), signals=base.signals,
+                 raw=raw, lags=Lags(base=base, first=first, last=last))
 
 
 class _Reader:
