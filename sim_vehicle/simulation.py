@@ -17,10 +17,15 @@ monitor's own computing time, in simulated time, i.e. multiplied by the speedup)
 ``tau_ca`` budget, and only when it overruns that budget is the true delay larger than the drawn one.
 The true ``tau(k)`` (application time minus ``k h``) is what the truth stream reports.
 
-Late and lost. A command whose application time would be ``>= (k+1) h`` is late: it is discarded and
-the actuator holds its last value for the next interval too (the paper leaves ``tau >= h`` to future
-work; holding is what a real servo with a stale-command rule does). A sample never answered by ``(k+1) h``
-is lost. A command for a sample older than the last applied one, or a repeat of it, is stale and ignored.
+Late and lost. A command acts when it is due, even in a later interval than its own sample's, unless a newer
+command has already acted (it is then stale and ignored: the newest command wins, as the monitor's lagged
+model assumes). Only a command whose application time would be past ``k h + max(h, ceiling)`` is late: it
+is discarded and the actuator holds (what a real servo with a stale-command rule does). ``ceiling`` is the
+delay SPEC's largest draw, so for a SPEC within one sample (the paper's ``uniform:0:0.46`` at h = 1 s) late
+means "not applied by (k+1) h", as the paper assumes, and for a SPEC past one sample (``uniform:0.05:0.12`` at
+h = 0.05 s) every drawn delay acts. A sample is settled (its truth published) once its command's deadline
+has passed; one never answered by then is lost. Each truth payload says which command was in force at its
+instant (``in_force``) and, for the sample's own command, when it acted (``tau``, which may exceed h).
 
 On-board commands. With ``autopilot`` (a gain K with u(k) = K y(k), linear plant only) the vehicle flies
 itself, as in an observe-only run; with ``excite`` (``--excite prbs:AMP:SECONDS``) it flies an identification
@@ -86,6 +91,8 @@ class SampleTruth:
     tau: float | None = None
     late: bool = False
     onboard: bool = False  # the vehicle's own command (autopilot, excitation) acted, not an answer from outside
+    in_force: int = -1  # the sample whose command was in force at this instant (-1: none yet)
+    u_end: float | None = None  # the deflection commanded at the end of the interval
     extras: dict = field(default_factory=dict)  # the model's own keys (an aircraft: surface, trim, ...)
 
     def payload(self, sysid: int, u: float, unit: str) -> dict:
@@ -93,7 +100,8 @@ class SampleTruth:
         status = "applied" if self.tau is not None else ("late" if self.late else "lost")
         return {
             "sysid": sysid, "k": self.k, "t": self.t, "x": self.x, "f": self.f, "d": self.d, "tau": self.tau,
-            "status": status, "tau_drawn": self.tau_drawn, "u": [u], "elevator": self.elevator,
+            "status": status, "tau_drawn": self.tau_drawn, "u": [u if self.u_end is None else self.u_end],
+            "in_force": self.in_force, "elevator": self.elevator,
             "effectiveness": self.effectiveness, "stuck": self.stuck, "unit": unit, **self.extras,
         }
 
@@ -137,6 +145,7 @@ class Simulation:
         self._arrivals: Counter = Counter()
         self.k = -1  # last sample taken
         self.last_applied = -1
+        self.deadline = max(self.h, self.delay.ceiling)  # a command not applied by k h + deadline is late
         self.done = False
         self._push(0.0, self._sample, 0)
         self._push(0.0, self._heartbeat)
@@ -173,7 +182,7 @@ class Simulation:
             return self._count("dropped")
         extra, _ = fate[0]  # a downlink duplicate would be stale on arrival: only the first copy matters
         t_apply = max(t_arrival + extra, k * self.h + self.delay.tau(k))
-        if t_apply >= (k + 1) * self.h:
+        if t_apply >= k * self.h + self.deadline:
             if k in self._pending:
                 self._pending[k].late = True
             return self._count("late")
@@ -191,7 +200,9 @@ class Simulation:
     def _sample(self, t: float, k: int) -> None:
         model = self.model
         self.airframe.advance_to(t)
-        self._settle(k - 1)
+        if k - 1 in self._pending:
+            self._pending[k - 1].u_end = self.airframe.target
+        self._settle_due(t)
         self.k = k
         x = model.state()
         outputs = model.outputs()
@@ -207,7 +218,7 @@ class Simulation:
         tau = self.delay.tau(k)
         truth = SampleTruth(k=k, t=t, x=x, f=f, d=d, elevator=self.airframe.position,
                             effectiveness=self.airframe.effectiveness, stuck=self.airframe.stuck, tau_drawn=tau,
-                            extras=model.truth_extras())
+                            extras=model.truth_extras(), in_force=self.last_applied)
         self._pending[k] = truth
         self.stats.samples["taken"] += 1
         self.stats.tau_drawn.append(tau)
@@ -283,6 +294,13 @@ class Simulation:
         if k in self._pending:
             self._pending[k].tau = tau
 
+    def _settle_due(self, t: float) -> None:
+        """Settle every sample whose command can no longer act (its deadline has passed by ``t``), oldest first."""
+        for k in sorted(self._pending):
+            if k * self.h + self.deadline > t + 1e-12:
+                break
+            self._settle(k)
+
     def _settle(self, k: int) -> None:
         truth = self._pending.pop(k, None)
         self._arrivals.pop(k - 2, None)
@@ -299,5 +317,8 @@ class Simulation:
 
     def _finish(self, t: float, k: int) -> None:
         self.airframe.advance_to(t)
-        self._settle(k - 1)
+        if k - 1 in self._pending:
+            self._pending[k - 1].u_end = self.airframe.target
+        for pending in sorted(self._pending):  # the run ends: what has not acted by now never will
+            self._settle(pending)
         self.done = True

@@ -81,8 +81,9 @@ def hinf_norms(A: np.ndarray, B: np.ndarray, outputs: list[np.ndarray], points: 
         """
         z = np.exp(1j * np.atleast_1d(omega))
         X = np.empty((n, z.size, Bt.shape[1]), dtype=complex)  # state index first: X[i + 1:] is contiguous
+        flat = X.reshape(n, -1)  # a view: one matrix-vector product per row (tensordot's reshapes cost 3x)
         for i in range(n - 1, -1, -1):
-            acc = Bt[i] + np.tensordot(upper[i], X[i + 1:], axes=(0, 0)) if i < n - 1 else \
+            acc = Bt[i] + (upper[i] @ flat[i + 1:]).reshape(z.size, -1) if i < n - 1 else \
                 np.broadcast_to(Bt[i], (z.size, Bt.shape[1]))
             X[i] = acc / (z - poles[i])[:, None]
         return X

@@ -13,6 +13,11 @@ and reports:
   Bounded Real Lemma re-checked in numpy at every vertex, plus a check that every ``B0(tau)`` of the
   grid lies inside the polytope (a linear program per point).
 
+Past one sample (a plant whose ``tau_max >= h``, ``monitor.model.long_delay``) the points checked are the
+constant delays of the grid plus arrival patterns in which each whole-sample part sits anywhere in its window
+independently (the windows' corners first): the switching a varying delay causes. They join the
+time-varying growth and the certificate's containment check.
+
 ``stable`` is true only when ``rho_max < 1`` and ``rho_time_varying < 1``.
 """
 
@@ -24,7 +29,8 @@ import numpy as np
 from scipy.optimize import linprog
 
 from monitor.model.closed_loop import Gains, LoopMatrices, closed_loop, steady_state
-from monitor.model.delay_model import b0_of_tau, tau_grid
+from monitor.model.delay_model import b0_of_tau, lag_curve, point_size, tau_grid
+from monitor.model.long_delay import lag_intervals
 from monitor.checks.norms import hinf_norm
 from monitor.model.plant import Plant
 
@@ -51,11 +57,31 @@ class Verdict:
         return asdict(self)
 
 
-def _loops(plant: Plant, gains: Gains, taus: np.ndarray, steady) -> list[LoopMatrices]:
-    return [closed_loop(plant, gains, b0_of_tau(plant, float(t)), steady=steady) for t in taus]
+def _points(plant: Plant, taus: np.ndarray, seed: int, mixed: int = 40) -> list[np.ndarray]:
+    """The uncertain points checked: every constant delay of the grid and, past one sample, ``mixed`` arrival
+    patterns where each whole-sample part sits anywhere in its window independently (a delay that changes
+    from one command to the next): constant delays alone would never show the loop switching between parts."""
+    points = [b0_of_tau(plant, float(t)) for t in taus]
+    if plant.lags is None:
+        return points
+    curve = lag_curve(plant.lags.base)
+    windows = lag_intervals(plant.h, plant.tau_min, plant.tau_max)
+    rng = np.random.default_rng([seed, 0x1A6])
+    corners = [[lo, hi] for lo, hi in windows]
+    for i in range(mixed):  # the windows' corners first (the extreme switches), then random interior points
+        if i < 2 ** len(windows):
+            a = [c[(i >> b) & 1] for b, c in enumerate(corners)]
+        else:
+            a = [rng.uniform(lo, hi) for lo, hi in windows]
+        points.append(np.vstack([curve(float(x)) for x in a]))
+    return points
 
 
-def _growth_rate(mats: list[np.ndarray], rng: np.random.Generator, steps: int = 3000) -> float:
+def _loops(plant: Plant, gains: Gains, points: list[np.ndarray], steady) -> list[LoopMatrices]:
+    return [closed_loop(plant, gains, point, steady=steady) for point in points]
+
+
+def _growth_rate(mats: list[np.ndarray], rng: np.random.Generator, steps: int = 3000, last: int | None = None) -> float:
     """Largest per-step growth of ``||A(k) ... A(1)||`` over a few switching patterns (renormalised).
 
     Measured over the second half of the product only, ``(||P_T|| / ||P_{T/2}||)^(2/T)``: a loop with a
@@ -64,10 +90,11 @@ def _growth_rate(mats: list[np.ndarray], rng: np.random.Generator, steps: int = 
     stable), while after T/2 samples only the asymptotic rate is left.
     """
     N = mats[0].shape[0]
+    end = len(mats) - 1 if last is None else last  # the index of tau_max (mixed arrival patterns follow it)
     patterns = [
         rng.integers(0, len(mats), steps),  # i.i.d. delays over the grid
-        np.arange(steps) % 2 * (len(mats) - 1),  # alternate the two ends of the interval
-        rng.integers(0, 2, steps) * (len(mats) - 1),  # random ends
+        np.arange(steps) % 2 * end,  # alternate the two ends of the interval
+        rng.integers(0, 2, steps) * end,  # random ends
     ]
     worst = 0.0
     half = steps // 2
@@ -87,32 +114,31 @@ def _growth_rate(mats: list[np.ndarray], rng: np.random.Generator, steps: int = 
 
 
 def _check_certificate(plant: Plant, gains: Gains, certificate: dict[str, np.ndarray], gamma_e: float | None,
-                       gamma_z: float | None, steady, taus: np.ndarray) -> tuple[bool | None, str]:
-    """Re-check a polytopic certificate: containment of every B0(tau), then the BRL at every vertex."""
+                       gamma_z: float | None, steady, points: list[np.ndarray]) -> tuple[bool | None, str]:
+    """Re-check a polytopic certificate: containment of every point checked, then the BRL at every vertex."""
     if not {"P", "Q", "vertices"} <= set(certificate) or gamma_e is None or gamma_z is None:
         return None, "no polytopic certificate in the gains file"
     P, Q, vertices = certificate["P"], certificate["Q"], certificate["vertices"]
     N = 2 * plant.n + plant.q + plant.m
-    if P.shape != (N, N) or Q.shape != (N, N) or vertices.shape[1] != plant.B0.size:
+    if P.shape != (N, N) or Q.shape != (N, N) or vertices.shape[1] != point_size(plant):
         return False, "certificate matrices do not fit the real closed loop of this plant"
-    for t in taus:
-        point = b0_of_tau(plant, float(t)).ravel()
+    for i, point in enumerate(points):
         k = len(vertices)
-        res = linprog(np.zeros(k), A_eq=np.vstack([vertices.T, np.ones((1, k))]), b_eq=np.append(point, 1.0),
+        res = linprog(np.zeros(k), A_eq=np.vstack([vertices.T, np.ones((1, k))]), b_eq=np.append(point.ravel(), 1.0),
                       bounds=[(0, None)] * k, method="highs")
         if res.status != 0:
-            return False, f"B0(tau = {t:.4f}) lies outside the certificate's polytope"
+            return False, f"uncertain point {i} (of {len(points)}; the first are the constant delays) lies outside the certificate's polytope"
     if np.min(np.linalg.eigvalsh(P)) <= 0 or np.min(np.linalg.eigvalsh(Q)) <= 0:
         return False, "certificate matrices are not positive definite"
     for v in vertices:
-        loop = closed_loop(plant, gains, v.reshape(plant.B0.shape), steady=steady)
+        loop = closed_loop(plant, gains, v.reshape(-1, plant.m), steady=steady)
         for X, C, gamma in ((P, loop.C_ef, gamma_e), (Q, loop.C_y, gamma_z)):
             A, B = loop.A, loop.B
             brl = np.block([[A.T @ X @ A - X + C.T @ C, A.T @ X @ B], [B.T @ X @ A, B.T @ X @ B - gamma**2 * np.eye(B.shape[1])]])
             top = float(np.max(np.linalg.eigvalsh(0.5 * (brl + brl.T))))
             if top >= 0.0:
                 return False, f"Bounded Real Lemma fails at a vertex (largest eigenvalue {top:.3g})"
-    return True, f"common P, Q valid at all {len(vertices)} vertices; polytope contains B0(tau) on {len(taus)} grid points"
+    return True, f"common P, Q valid at all {len(vertices)} vertices; polytope contains the {len(points)} points checked"
 
 
 def verify_gains(plant: Plant, gains: Gains, certificate: dict[str, np.ndarray] | None = None,
@@ -128,17 +154,18 @@ def verify_gains(plant: Plant, gains: Gains, certificate: dict[str, np.ndarray] 
     except ValueError:
         steady = (np.zeros((plant.n, plant.q)), np.zeros((plant.m, plant.q)))
         fault_leak = None  # a pole at 1: a constant fault has no steady state
-    loops = _loops(plant, gains, taus, steady)
-    radii = np.array([np.max(np.abs(np.linalg.eigvals(lp.A))) for lp in loops])
+    points = _points(plant, taus, seed)
+    loops = _loops(plant, gains, points, steady)
+    radii = np.array([np.max(np.abs(np.linalg.eigvals(lp.A))) for lp in loops[: len(taus)]])
     i_worst = int(np.argmax(radii))
-    rho_tv = _growth_rate([lp.A for lp in loops], np.random.default_rng(seed))
+    rho_tv = _growth_rate([lp.A for lp in loops], np.random.default_rng(seed), last=len(taus) - 1)
     hinf_taus = np.unique(np.linspace(0, len(taus) - 1, 41).astype(int))
     ef = [hinf_norm(loops[i].A, loops[i].B, loops[i].C_ef) for i in hinf_taus]
     yy = [hinf_norm(loops[i].A, loops[i].B, loops[i].C_y) for i in hinf_taus]
     j_worst = int(np.argmax(ef))
     cert_ok, detail = (None, "no certificate given")
     if certificate:
-        cert_ok, detail = _check_certificate(plant, gains, certificate, gamma_e, gamma_z, steady, taus)
+        cert_ok, detail = _check_certificate(plant, gains, certificate, gamma_e, gamma_z, steady, points)
     stable = bool(radii[i_worst] < 1.0 and rho_tv < 1.0)
     bound_holds = None
     if gamma_e is not None and gamma_z is not None:

@@ -47,7 +47,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from monitor.design import run_design
-    from monitor.model.delay_model import delta_summary
     from monitor.errors import UserError
     from monitor.gains import write_gains
     from monitor.model.plant import load_plant
@@ -83,14 +82,28 @@ def run(args: argparse.Namespace) -> int:
         print(f"gamma_e    {result.gamma_e:.4f}   gamma_z {result.gamma_z:.4f}   ({result.bounds_apply_to})")
         print(f"solver     {result.solver_path}; build {result.build_seconds:.3f} s, "
               f"solve {result.solve_seconds:.3f} s, total {result.total_seconds:.3f} s")
-        deltas = delta_summary(plant)
-        print(f"delta      Lemma 1 as printed {deltas['delta_lemma1']:.4f}; exact max |F(tau)| {deltas['delta_exact']:.4f}; "
-              f"plant file {deltas['delta_file'] or '-'} (tau_bar {deltas['tau_bar']:.4f} s). "
-              + ("Used: the exact B0(tau) curve, in a polytope." if result.method == "certified" else
-                 "Used: none (nominal delay)." if result.method == "separate" else
-                 "Used: the polytope, for each part alone." if result.method == "robust-separate" else
-                 "Used: none; Theorem 1 treats d_tau as an outside input."))
+        if plant.lags is not None:
+            lags = plant.lags
+            print(f"delay      past one sample: tau in [{plant.tau_min:g}, {plant.tau_max:g}] s is {lags.first} to "
+                  f"{lags.last} whole samples of h = {plant.h:g} s; the commands in flight (u(k-2) to "
+                  f"u(k-{lags.last + 1})) are in the loop's state. Used: one polytope per whole-sample part, "
+                  "and every combination of their vertices.")
+        else:
+            _print_deltas(plant, result.method)
         for note in result.notes:
             print(f"note       {note}")
         print(f"wrote      {args.out}")
     return 0
+
+
+def _print_deltas(plant, method: str) -> None:
+    """The paper's delta next to the exact one: how the design treated a delay within one sample."""
+    from monitor.model.delay_model import delta_summary
+
+    deltas = delta_summary(plant)
+    print(f"delta      Lemma 1 as printed {deltas['delta_lemma1']:.4f}; exact max |F(tau)| {deltas['delta_exact']:.4f}; "
+          f"plant file {deltas['delta_file'] or '-'} (tau_bar {deltas['tau_bar']:.4f} s). "
+          + ("Used: the exact B0(tau) curve, in a polytope." if method == "certified" else
+             "Used: none (nominal delay)." if method == "separate" else
+             "Used: the polytope, for each part alone." if method == "robust-separate" else
+             "Used: none; Theorem 1 treats d_tau as an outside input."))

@@ -26,11 +26,17 @@ def run_design(method: str, plant: Plant, **options) -> DesignResult:
     objective = options.pop("objective", None)
     max_losses = int(options.pop("max_losses", 0) or 0)
     if max_losses:
-        from monitor.model.loss_model import check_max_losses
+        from monitor.model.loss_model import check_max_losses, refuse_past_one_sample
 
         check_max_losses(max_losses)
+        refuse_past_one_sample(plant)
     if max_losses and (method, objective) in (("certified", None), ("certified", "fast")):
         options["max_losses"] = max_losses  # the fast search steers away from loss-divergent controllers
+    if method == "robust-separate" and plant.lags is not None:
+        from monitor.errors import UserError
+
+        raise UserError("the robust-separate method treats the delay as a B0 mismatch within one sample; this plant's "
+                        f"tau_max = {plant.tau_max:g} s reaches past h = {plant.h:g} s: use certified (the default)")
     if objective is not None and (method != "certified" or objective not in OBJECTIVES):
         raise ValueError(f"objective {objective!r} applies to the certified method only (choose from {', '.join(OBJECTIVES)})")
     if method == "certified" and objective in (None, "fast"):

@@ -18,7 +18,9 @@ deviation from it (y - y0, u - u0); only the saturation knows u0: the limit hold
 Which u(k-1): the contract says the deflection the vehicle *reports* at sample k (``u_prev``), because a
 command that was lost or late never acted; only when no report came does the estimator use its own
 last command. Observe-only (``observe``): the vehicle's own controller issued u(k), reported with the
-sample, and only eq. (5) runs. Why saturate here: a command beyond the actuator's travel is not what
+sample, and only eq. (5) runs. Past one sample (a lagged plant, ``monitor.model.long_delay``) the report at k is
+whichever command is in force, not u(k-1); the lagged model carries the commands in flight itself, so the
+estimator keeps its own last command and ignores the report (the certificate covers every arrival pattern). Why saturate here: a command beyond the actuator's travel is not what
 acts on the plant, and an observer fed the unsaturated value would learn a fault that is not there.
 """
 
@@ -105,6 +107,7 @@ class Estimator:
         predict[:n, n + q :] = B0 + B1
         self._predict_T = predict
         self._m, self._N, self._nq = m, N, n + q
+        self._n_reported = plant.physical.n  # x_hat as reported: the aircraft's state, not the commands in flight
         self._U_rows = self._U.tolist()
         self._skipped = 0
         self._O_rows = self._O.tolist()
@@ -142,7 +145,7 @@ class Estimator:
                 s.z = np.linalg.matrix_power(self._predict_T, gap) @ s.z
                 self._skipped = gap
         z = s.z.tolist()
-        if u_prev is not None:
+        if u_prev is not None and self.plant.lags is None:
             nq = self._nq
             held = [float(e) for e in u_prev]
             if applied is False:
@@ -175,7 +178,7 @@ class Estimator:
         reset = not all(map(math.isfinite, z_next))
         s.z = np.zeros(self._N) if reset else np.array(z_next)
         s.k_last = k
-        return StepResult(k=k, u=np.array(u), x_hat=np.array(v[:n]), f_hat=np.array(v[n:nq]),
+        return StepResult(k=k, u=np.array(u), x_hat=np.array(v[:self._n_reported]), f_hat=np.array(v[n:nq]),
                           residual=np.array(out[nq:]), skipped=self._skipped, reset=reset)
 
     def step(self, s: EstimatorState, k: int, y, u_prev=None, applied: bool | None = None) -> StepResult:

@@ -27,7 +27,7 @@ import numpy as np
 from monitor.model.closed_loop import Gains, closed_loop, observer_indices
 from monitor.model.plant import Plant
 
-__all__ = ["loss_modes", "loss_sequences", "macro_steps", "macro_step_growth", "check_max_losses", "LOSS_KINDS",
+__all__ = ["refuse_past_one_sample", "loss_modes", "loss_sequences", "macro_steps", "macro_step_growth", "check_max_losses", "LOSS_KINDS",
            "MAX_LOSSES"]
 
 LOSS_KINDS = ("sample", "command")
@@ -44,8 +44,24 @@ def check_max_losses(max_losses: int) -> int:
     return max_losses
 
 
+def refuse_past_one_sample(plant: Plant) -> None:
+    """Losses are certified for delays within one sample only: say so in one line for a lagged plant.
+
+    Why: a lost or late command here means "the actuator holds u(k-1) the whole interval"; past one sample a
+    late command still acts when it arrives (the link rule of ``monitor.model.long_delay``), so the loss
+    modes above are not what happens, and no certificate of them would be sound.
+    """
+    if plant.lags is not None:
+        from monitor.errors import UserError
+
+        raise UserError(f"--max-losses is certified for delays within one sample (tau_max < h); this plant's "
+                        f"tau_max = {plant.tau_max:g} s reaches past h = {plant.h:g} s, where a late command still "
+                        f"acts on arrival: certify the delay alone (without --max-losses)")
+
+
 def loss_modes(plant: Plant, gains: Gains) -> dict[str, np.ndarray]:
     """The state matrices of a lost sample and of a lost (or late) command; the inputs do not matter here."""
+    refuse_past_one_sample(plant)
     A, C, Df = plant.A, plant.C, plant.Df
     Bsum = plant.B0 + plant.B1
     sx, se, sf, su = observer_indices(plant)

@@ -375,7 +375,7 @@ class VehicleTable:
             if u_report is None:
                 vehicle.no_report += 1
                 self.counters.no_report += 1
-            else:
+            elif est.plant.lags is None:  # past one sample the report is whichever command is in force
                 applied = self._judge_applied(vehicle, sample.k, u_report)
             result = est.step(vehicle.state, sample.k, y, u_prev=u_report, applied=applied)
             vehicle.last_command = result.u.tolist()

@@ -204,6 +204,20 @@ class DelaySampler:
             return float(np.mean(self.trace))
         return self.params[0]
 
+    @property
+    def ceiling(self) -> float:
+        """The largest delay the spec draws (``normal``: mean + 4 std, beyond which a draw is one in 30,000).
+
+        Why a vehicle needs it: past one sample a command still acts when it arrives, and the ceiling is how
+        long the vehicle waits for one before counting it late (its stale-command rule)."""
+        if self.kind == "uniform":
+            return self.params[1]
+        if self.kind == "trace":
+            return float(max(self.trace))
+        if self.kind == "normal":
+            return self.params[0] + 4.0 * self.params[1]
+        return self.params[0]
+
     def __str__(self) -> str:
         return self.spec
 
