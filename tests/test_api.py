@@ -3,16 +3,14 @@
 from __future__ import annotations
 
 import doctest
-import os
-import re
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import monitor.api
+from tests.readme_blocks import Session, group
 
 
 def test_the_api_docstrings_are_true():
@@ -22,17 +20,14 @@ def test_the_api_docstrings_are_true():
 
 def test_the_readme_python_block_runs_as_it_stands_in_a_fresh_directory(tmp_path):
     """The README's notebook example, copied as it stands, in a plain interpreter: it makes the recording it reads."""
-    text = (Path(__file__).resolve().parent.parent / "README.md").read_text("utf-8")
-    section = text[text.index("## From Python: the notebook API"):]
-    block = re.search(r"```python\n(.*?)```", section, re.S).group(1)
-    out = subprocess.run([sys.executable, "-c", block], capture_output=True, text=True, timeout=180, cwd=tmp_path,
-                         env={**os.environ, "RERUN_ANALYTICS": "0"})
-    assert out.returncode == 0, out.stderr[-3000:]
-    *_, simulated, replayed = out.stdout.split()
+    (block,) = group("notebook")  # the block marked <!-- readme: run notebook --> (tests/readme_blocks.py)
+    with Session(tmp_path) as s:
+        (script,) = s.run(block)  # a script in a fresh directory; it must exit 0
+    *_, simulated, replayed = script.out().split()
     assert simulated == replayed and 2 <= int(simulated) <= 6  # report() on sim.rrd agrees with the simulation
     from monitor.api import read_recording
 
-    (series,) = read_recording(tmp_path / "sim.rrd").vehicles.values()
+    (series,) = read_recording(s.dir / "sim.rrd").vehicles.values()
     assert len(series.samples) == 100 and len(series.truth) == 100
     assert series.truth[30].f == [2.0] and series.samples[30].k == 30
 

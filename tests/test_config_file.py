@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import re
 import subprocess
 import sys
 from pathlib import Path
@@ -14,6 +13,7 @@ from monitor.cli import build_parser as monitor_parser
 from monitor.config_file import apply_config_file, config_defaults, parse_args_with_config, read_config
 from monitor.errors import UserError
 from sim_vehicle.cli import build_parser as vehicle_parser
+from tests.readme_blocks import file_block
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -22,16 +22,9 @@ def _sub(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
     return next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[name]
 
 
-def _readme_monitor_toml() -> str:
-    text = (REPO / "README.md").read_text("utf-8")
-    match = re.search(r"`/etc/fault-monitor/monitor.toml`:\s*```toml\n(.*?)```", text, re.S)
-    assert match, "README lost the example monitor.toml"
-    return match.group(1)
-
-
 def test_the_readme_monitor_file_sets_run_flags_and_flags_still_win(tmp_path):
     conf = tmp_path / "monitor.toml"
-    conf.write_text(_readme_monitor_toml())
+    conf.write_text(file_block("monitor.toml").text)  # the block marked <!-- readme: file monitor.toml -->
     parser = monitor_parser()
     args = parse_args_with_config(parser, ["run", "--config", str(conf), "--name", "from-flag", "--mavlink",
                                            "udpin:127.0.0.1:14551", "--mavlink", "udpin:127.0.0.1:14552"])

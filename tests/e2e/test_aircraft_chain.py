@@ -1,24 +1,27 @@
 """The whole chain on a JSBSim aircraft with the README's commands only, judged against the truth stream.
 
+The README's JSBSim blocks run as they stand (``tests/readme_blocks.py``: free ports, at most 1500 samples, at 50x):
 sim-vehicle flies c172p through MAVProxy (a real router writing the tlog a user would record) with an elevator
-PRBS; `fault-monitor identify` turns that tlog into a plant; `design` and `verify` certify gains for it; the
-monitor then closes the loop on the nonlinear aircraft through MAVProxy with a 2 deg elevator bias, and
-`analyse` reads that flight's tlog observe-only. f_hat must be within 5 % of the bias from 1 s after onset to 60 s
+PRBS; `fault-monitor identify` turns that tlog into a plant; `design` certifies gains for it. Then `verify` checks
+them, the monitor closes the loop on the nonlinear aircraft through the same MAVProxy with a 2 deg elevator bias,
+and `analyse` reads that flight's tlog observe-only. f_hat must be within 5 % of the bias from 1 s after onset to 30 s
 after it, in both.
 """
 
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from tests.daemons import Daemon, free_tcp_port, free_udp_port, wait_for
-from tests.e2e.test_mavproxy import MavProxy, _tlog_counts
+from tests.daemons import Daemon, free_tcp_port, wait_for
+from tests.e2e.test_mavproxy import _tlog_counts
 from tests.e2e.test_monitor_paper import processed_count, wait_ready
+from tests.readme_blocks import Session, group
 
 RATE = 20  # Hz: h = 0.05 s
 EXCITE_STEPS = 1500  # 75 s: a 60-s PRBS and the settling after it
@@ -43,8 +46,8 @@ def _fly(d: Path, master: int, sysid: int, steps: int, *vehicle_args: str) -> No
         assert vehicle.wait(120) == 0, vehicle.log()[-3000:]
 
 
-def _logged(mp: MavProxy, sysid: int, steps: int) -> None:
-    wait_for(lambda: mp.tlog.exists() and _tlog_counts(mp.tlog)[("AOA_SSA", sysid)] >= steps - 1, 15,
+def _logged(tlog: Path, sysid: int, steps: int) -> None:
+    wait_for(lambda: tlog.exists() and _tlog_counts(tlog)[("AOA_SSA", sysid)] >= steps - 1, 15,
              what=f"MAVProxy's tlog to hold vehicle {sysid}'s flight")
 
 
@@ -66,39 +69,37 @@ def _assert_tracks_the_bias(f_hat: dict[int, float], truth_f: dict[int, float], 
 def test_excite_identify_design_and_close_the_loop_on_jsbsim(tmp_path: Path) -> None:
     from monitor.api import read_recording
 
-    # One MAVProxy for both flights, as a user's ground station stays up: vehicle 1 flies the identification
-    # manoeuvre while nothing listens behind MAVProxy yet; vehicle 2 then flies closed loop through it.
-    port = free_udp_port()
-    master = free_udp_port()
-    with MavProxy(tmp_path, master, port) as mp:
-        # 1. the identification flight
-        _fly(tmp_path, master, 1, EXCITE_STEPS, "--excite", "prbs:1:60", "--speedup", "10")
-        _logged(mp, 1, EXCITE_STEPS)
-        plant = tmp_path / "c172p.toml"
-        ident = json.loads(_cli("monitor", "identify", str(mp.tlog), "--sysid", "1", "--out", str(plant),
-                                "--json").stdout)
-        assert min(ident["fit_percent"][name] for name in ("alpha", "q")) >= 90.0, ident["fit_percent"]
+    # One MAVProxy for every flight, as a user's ground station stays up: vehicle 1 flies the README's flights
+    # (the identification manoeuvre) while nothing listens behind MAVProxy yet; vehicle 2 then flies closed loop.
+    flights, identification = group("aircraft")
+    with Session(tmp_path, steps=EXCITE_STEPS, speedup=50) as s:
+        # 1. the README: the identification flights recorded by MAVProxy, identify, design
+        s.run(flights)
+        *_, identify, _design = s.run(identification)
+        s.assert_ran_all("aircraft")
+        tlog, plant, gains = s.dir / "flight.tlog", s.dir / "c172p.toml", s.dir / "c172p-gains.toml"
+        fit = re.search(r"fit on held-out data .* alpha ([\d.]+) %, q ([\d.]+) %", identify.out())
+        assert fit and min(map(float, fit.groups())) >= 90.0, identify.failure("fit below 90 %")
 
-        # 2. gains for it, certified and independently verified
-        gains = tmp_path / "gains.toml"
-        _cli("monitor", "design", "--plant", str(plant), "--out", str(gains), "--quiet")
+        # 2. the gains, independently verified
         _cli("monitor", "verify", "--plant", str(plant), "--gains", str(gains))
 
-        # 3. the closed loop on the nonlinear aircraft with a 2 deg bias, through MAVProxy
+        # 3. the closed loop on the nonlinear aircraft with a 2 deg bias, through the README's MAVProxy
         rrd = tmp_path / "closed.rrd"
         truth = tmp_path / "truth.jsonl"
         monitor = Daemon("monitor", ["run", "--plant", str(plant), "--gains", str(gains), "--mavlink",
-                                     f"udpin:127.0.0.1:{port}", "--zenoh-listen", f"tcp/127.0.0.1:{free_tcp_port()}",
-                                     "--rrd", str(rrd), "--name", "aircraft"], tmp_path / "monitor.log")
+                                     f"udpin:127.0.0.1:{s.port(14550)}", "--zenoh-listen",
+                                     f"tcp/127.0.0.1:{free_tcp_port()}", "--rrd", str(rrd), "--name", "aircraft"],
+                         tmp_path / "monitor.log")
         with monitor:
             wait_ready(monitor)
             assert "operating point" in monitor.log(), monitor.log()[-2000:]
-            _fly(tmp_path, master, 2, FLIGHT_STEPS, "--fault", f"bias:{BIAS:g}@{ONSET}", "--speedup", "3",
+            _fly(tmp_path, s.port(14551), 2, FLIGHT_STEPS, "--fault", f"bias:{BIAS:g}@{ONSET}", "--speedup", "3",
                  "--truth-jsonl", str(truth))
-            _logged(mp, 2, FLIGHT_STEPS)
+            _logged(tlog, 2, FLIGHT_STEPS)
             monitor.signal()  # SIGTERM: the summary line and a complete recording
             assert monitor.wait(30) == 0, monitor.log()[-3000:]
-        flight = mp.tlog
+        s.stop()
     assert processed_count(monitor.log()) >= FLIGHT_STEPS - 5, monitor.log()[-2000:]
     truth_f = {p["k"]: float(p["f"][0]) for p in map(json.loads, truth.read_text().splitlines()) if p["f"]}
     live = read_recording(rrd).vehicles[2].samples
@@ -106,7 +107,7 @@ def test_excite_identify_design_and_close_the_loop_on_jsbsim(tmp_path: Path) -> 
 
     # 4. observe-only on the same flight: analyse reads MAVProxy's tlog of it
     analysed = tmp_path / "analysed.rrd"
-    _cli("monitor", "analyse", str(flight), "--sysid", "2", "--plant", str(plant), "--gains", str(gains),
+    _cli("monitor", "analyse", str(tlog), "--sysid", "2", "--plant", str(plant), "--gains", str(gains),
          "--rrd", str(analysed))
     offline = read_recording(analysed).vehicles[2].samples
     _assert_tracks_the_bias(_f_hat_by_k(offline), truth_f, "observe-only over the tlog")

@@ -1,7 +1,9 @@
 """MAVProxy, the router users put between vehicle and monitor, in the loop (one message per datagram).
 
 Closed loop: sim-vehicle -> MAVProxy (udpin master, udpout to the monitor) -> fault-monitor run, and the
-commands and ground-station feedback back the same way; MAVProxy's own tlog must hold all three.
+commands and ground-station feedback back the same way; MAVProxy's own tlog must hold all three. That way is the
+README's block, run as it stands (``tests/readme_blocks.py``); the other way (MAVProxy listening for its outputs,
+the monitor sending to it) is written out here.
 Observe-only: the vehicle flies on its own gain (--autopilot), the monitor only watches, and the tlog
 MAVProxy wrote during the live run, analysed offline, must give the same f_hat as the live monitor.
 """
@@ -9,6 +11,8 @@ MAVProxy wrote during the live run, analysed offline, must give the same f_hat a
 from __future__ import annotations
 
 import json
+import re
+import shutil
 import subprocess
 import sys
 from collections import Counter
@@ -20,6 +24,7 @@ import pytest
 from monitor.process import udp_port_taken
 from tests.daemons import Daemon, free_tcp_port, free_udp_port, wait_for
 from tests.e2e.test_monitor_paper import gains_file, processed_count, wait_ready  # noqa: F401 (fixture)
+from tests.readme_blocks import Session, group
 
 STEPS = 40
 SPEEDUP = 10
@@ -61,14 +66,14 @@ class MavProxy(Daemon):
         return super().stop(timeout)
 
 
-def _wait_for_tlog(mp: MavProxy, timeout: float = 10.0) -> None:
+def _wait_for_tlog(tlog: Path, timeout: float = 10.0) -> None:
     """MAVProxy writes its tlog from a queue on its own thread and a signal can end it before the queue drains:
     wait (bounded) until the tlog holds the vehicle's last sample before stopping it."""
     import time
 
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        if mp.tlog.exists() and _tlog_counts(mp.tlog)[("AOA_SSA", 1)] >= STEPS - 1:  # as the tests require
+        if tlog.exists() and _tlog_counts(tlog)[("AOA_SSA", 1)] >= STEPS - 1:  # as the tests require
             return
         time.sleep(0.2)
 
@@ -98,28 +103,44 @@ def _monitor(tmp_path: Path, gains: Path, port: int, *extra: str, kind: str = "u
     return Daemon("monitor", args, tmp_path / "monitor.log")
 
 
-@pytest.mark.parametrize("monitor_kind, mavproxy_out", [("udpin", "udpout"), ("udpout", "udpin")])
-def test_closed_loop_through_mavproxy(tmp_path: Path, gains_file: Path, monitor_kind: str, mavproxy_out: str) -> None:
-    """Either side may listen: with MAVProxy's --out=udpin the monitor's HEARTBEAT is what opens the way back."""
-    monitor_port, master_port = free_udp_port(), free_udp_port()
-    with MavProxy(tmp_path, master_port, monitor_port, mavproxy_out) as mp, \
-            _monitor(tmp_path, gains_file, monitor_port, kind=monitor_kind) as monitor:
-        wait_ready(monitor)
-        with _vehicle(tmp_path, master_port) as vehicle:
-            assert vehicle.wait(60) == 0, vehicle.log()
-        _wait_for_tlog(mp)
-        mp.stop()
-        log = monitor.log()
-        assert monitor.stop() == 0
-    summary = json.loads((tmp_path / "vehicle.json").read_text())
-    assert processed_count(monitor.log()) == STEPS, log[-2000:]
-    assert summary["commands"].get("applied", 0) >= 0.95 * STEPS, summary
-    counts = _tlog_counts(mp.tlog)
+def _assert_closed_loop(monitor_log: str, applied: int, tlog: Path) -> None:
+    assert processed_count(monitor_log) == STEPS, monitor_log[-2000:]
+    assert applied >= 0.95 * STEPS, applied
+    counts = _tlog_counts(tlog)
     for telemetry in ("ATTITUDE", "AOA_SSA", "ACTUATOR_OUTPUT_STATUS"):
         assert counts[(telemetry, 1)] >= STEPS - 1, counts
     assert counts[("SET_ACTUATOR_CONTROL_TARGET", 255)] >= STEPS - 1, counts
     assert counts[("NAMED_VALUE_FLOAT:FHAT", 255)] >= STEPS - 1, counts
     assert counts[("STATUSTEXT", 255)] >= 1, counts  # the alarm on the 2-degree bias reached the GCS side
+
+
+def test_the_readme_block_closes_the_loop_through_mavproxy(tmp_path: Path, gains_file: Path) -> None:
+    """The README's block: the monitor listens (udpin), MAVProxy sends to it (--out=udpout)."""
+    (block,) = group("mavproxy")
+    with Session(tmp_path, steps=STEPS, speedup=SPEEDUP) as s:
+        shutil.copy(gains_file, s.dir / "gains.toml")  # from the README's design line (run in tests/test_readme.py)
+        monitor, _mavproxy, vehicle = s.run(block)
+        _wait_for_tlog(s.dir / "flight.tlog")
+        s.stop()
+        s.assert_ran_all("mavproxy")
+    applied = re.search(r"commands: received \d+, applied (\d+)", vehicle.out())
+    assert applied, vehicle.failure("no summary")
+    _assert_closed_loop(monitor.err(), int(applied.group(1)), s.dir / "flight.tlog")
+
+
+def test_closed_loop_with_mavproxy_listening_for_its_outputs(tmp_path: Path, gains_file: Path) -> None:
+    """Either side may listen: with MAVProxy's --out=udpin the monitor's HEARTBEAT is what opens the way back."""
+    monitor_port, master_port = free_udp_port(), free_udp_port()
+    with MavProxy(tmp_path, master_port, monitor_port, "udpin") as mp, \
+            _monitor(tmp_path, gains_file, monitor_port, kind="udpout") as monitor:
+        wait_ready(monitor)
+        with _vehicle(tmp_path, master_port) as vehicle:
+            assert vehicle.wait(60) == 0, vehicle.log()
+        _wait_for_tlog(mp.tlog)
+        mp.stop()
+        assert monitor.stop() == 0
+    summary = json.loads((tmp_path / "vehicle.json").read_text())
+    _assert_closed_loop(monitor.log(), summary["commands"].get("applied", 0), mp.tlog)
 
 
 def test_observe_only_live_and_from_mavproxys_tlog_agree(tmp_path: Path, gains_file: Path) -> None:
@@ -132,7 +153,7 @@ def test_observe_only_live_and_from_mavproxys_tlog_agree(tmp_path: Path, gains_f
         wait_ready(monitor)
         with _vehicle(tmp_path, master_port, "--autopilot", "-0.5") as vehicle:
             assert vehicle.wait(60) == 0, vehicle.log()
-        _wait_for_tlog(mp)
+        _wait_for_tlog(mp.tlog)
         mp.stop()
         assert monitor.stop() == 0, monitor.log()[-2000:]
     log = monitor.log()

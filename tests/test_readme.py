@@ -1,0 +1,170 @@
+"""The README is a test: every code block carries a marker (``tests/readme_blocks.py``), and every block marked
+``run`` runs here as a user types it, under the harness's rewrites (free ports, fewer and faster samples). The
+notebook block runs in ``tests/test_api.py``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import shutil
+import signal
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from tests.daemons import wait_for
+from tests.e2e.test_monitor_paper import gains_file  # noqa: F401 (fixture)
+from tests.readme_blocks import Block, Session, blocks, check_command_parses, group, indented_code_lines
+from tests.test_dataflash import FORMATS
+
+# every group of run blocks and the test that runs it: a group added to the README without a test fails here
+RUN_GROUPS = {
+    "paper": "tests/test_readme.py::test_paper_daemons_then_the_replay_of_their_recording",
+    "router": "tests/test_readme.py::test_router_its_clients_and_a_python_subscriber",
+    "mavproxy": "tests/e2e/test_mavproxy.py::test_the_readme_block_closes_the_loop_through_mavproxy",
+    "aircraft": "tests/e2e/test_aircraft_chain.py::test_excite_identify_design_and_close_the_loop_on_jsbsim",
+    "notebook": "tests/test_api.py::test_the_readme_python_block_runs_as_it_stands_in_a_fresh_directory",
+}
+
+
+def test_every_block_carries_a_marker() -> None:
+    problems = [f"README.md:{b.line}: {b.problem()}" for b in blocks() if b.problem()]
+    problems += [f"README.md:{line}: a code block indented by four spaces can carry no marker: fence it (```)"
+                 for line in indented_code_lines()]
+    assert not problems, "\n".join(problems)
+
+
+def test_every_run_group_has_its_test() -> None:
+    groups = {b.arg("group") for b in blocks() if b.kind == "run"}
+    assert groups == set(RUN_GROUPS), f"run groups without a test: {sorted(groups - set(RUN_GROUPS))}; " \
+                                      f"tests without a group: {sorted(set(RUN_GROUPS) - groups)}"
+    for node in RUN_GROUPS.values():  # each named test exists (a rename must follow here)
+        path, name = node.split("::")
+        module = importlib.import_module(path.removesuffix(".py").replace("/", "."))
+        assert callable(getattr(module, name, None)), f"{node} does not exist"
+
+
+def _not_run_commands() -> list[tuple[Block, int, str]]:
+    found = []
+    for block in blocks():
+        if block.lang != "bash":
+            continue
+        skip = block.arg("skip")
+        for line, command in block.commands():
+            if block.kind == "not run" or (skip and command.startswith(skip)):
+                found.append((block, line, command))
+    return found
+
+
+def test_commands_not_run_still_parse() -> None:
+    """Flags of blocks that are not run exist and take the values given (the real parsers, nothing executed)."""
+    problems = [f"README.md:{line}: {command}\n  {complaint}" for _b, line, command in _not_run_commands()
+                if (complaint := check_command_parses(command))]
+    assert not problems, "\n".join(problems)
+    assert len(_not_run_commands()) >= 8  # the parse check is not silently empty
+
+
+# the DataFlash messages the README's ArduPlane map names: those tests/test_dataflash.py writes, and the pitch
+# controller's PIDP as ArduPlane 4.x declares it in its FMT record
+ARDUPLANE_FORMATS = {**FORMATS, "PIDP": (136, "QffffffffffB", "TimeUS,Tar,Act,Err,P,I,D,FF,DFF,Dmod,SRate,Flags")}
+
+
+def _layouts(kind: str):
+    if kind == "mavlink":
+        from monitor.link.signals import MAVLINK
+
+        return MAVLINK
+    from pymavlink.DFReader import DFFormat
+
+    from monitor.link.dataflash import DataFlashLayouts
+
+    formats = {name: DFFormat(t, name, 0, fmt, cols) for name, (t, fmt, cols) in ARDUPLANE_FORMATS.items()}
+    return DataFlashLayouts(formats, {name: t for name, (t, _f, _c) in ARDUPLANE_FORMATS.items()})
+
+
+@pytest.mark.parametrize("block", [b for b in blocks() if b.kind == "signals"], ids=lambda b: f"line{b.line}")
+def test_signal_maps_are_read_by_the_map_reader(block: Block) -> None:
+    """A map with ``outputs`` as run and analyse read it (for a plant with as many outputs as C has rows, when the
+    block shows C); one without, as identify reads it for each of its models."""
+    from monitor.commands.identify import _map_for
+    from monitor.link.signals import parse_signals
+    from monitor.model.identification import MODELS
+
+    raw = tomllib.loads(block.text)
+    table, where, layouts = raw["signals"], f"README.md:{block.line}", _layouts(block.arg("layouts"))
+    if "outputs" not in table:
+        for states in MODELS.values():
+            assert _map_for(table, where, states, layouts)[0].outputs == states
+        return
+    outputs = len(raw["C"]) if "C" in raw else len(table["outputs"])
+    smap = parse_signals(table, where, outputs, len(table["actuator"]), layouts)
+    assert smap.outputs == tuple(table["outputs"])
+
+
+@pytest.mark.parametrize("block", [b for b in blocks() if b.kind == "file"], ids=lambda b: b.arg("name"))
+def test_files_parse(block: Block) -> None:
+    if block.arg("name").endswith(".toml"):
+        assert tomllib.loads(block.text), f"README.md:{block.line}: an empty file"
+
+
+# -- the run groups -------------------------------------------------------------------------------------------------
+
+STEPS, SPEEDUP = 40, 25  # each flight of the paper plant (h = 1 s): 40 samples at 25x, 1.6 s; the bias starts at k = 20
+
+
+def _json_lines(text: str) -> list[dict]:
+    return [json.loads(line) for line in text.splitlines() if line.strip()]
+
+
+def _printed_last_sample(text: str) -> bool:
+    return any(e["k"] == STEPS - 1 for e in _json_lines(text))
+
+
+def test_paper_daemons_then_the_replay_of_their_recording(tmp_path: Path) -> None:
+    """Design, monitor, subscriber and vehicle, each as in a terminal of its own; Ctrl-C; then replay the recording."""
+    daemons, replay = group("paper")
+    with Session(tmp_path, steps=STEPS, speedup=SPEEDUP) as s:
+        design, monitor, subscriber, _flight = s.run(daemons)
+        assert "certificate" in design.out() and (s.dir / "gains.toml").exists(), design.failure("no gains file")
+        wait_for(lambda: _printed_last_sample(subscriber.out()), 10, what="the subscriber to print the last sample")
+        s.stop()
+        estimates = _json_lines(subscriber.out())
+        assert {e["sysid"] for e in estimates} == {1} and any(e["alarm"] for e in estimates), subscriber.failure("")
+        assert abs(estimates[-1]["f_hat"][0] - 2.0) < 0.1, subscriber.failure("the 2-degree bias not estimated")
+        assert f"samples processed {STEPS}" in monitor.err(), monitor.failure("not every sample processed")
+
+        plain, as_json, with_spec = s.run(replay)
+        assert f"{STEPS} samples" in plain.out() and "(from the recorded truth)" in plain.out(), plain.failure("")
+        report = json.loads(as_json.out())
+        assert report["samples"] == STEPS and report["settling_steps"] is not None, as_json.failure("")
+        assert "(from SPEC bias:2@20)" in with_spec.out(), with_spec.failure("not scored against the SPEC")
+        s.assert_ran_all("paper")
+
+
+def test_router_its_clients_and_a_python_subscriber(tmp_path: Path, gains_file: Path) -> None:
+    """The router block; then, as late joiners, the zenoh-python script and the bundled clients, while the vehicle
+    flies again (the same command): each sees the monitor through the router."""
+    routed, bundled, script = group("router")
+    with Session(tmp_path, steps=STEPS, speedup=SPEEDUP) as s:
+        shutil.copy(gains_file, s.dir / "gains.toml")  # the README's design line (run by the paper group's test)
+        _router, _monitor, subscriber, flight = s.run(routed)
+        wait_for(lambda: _printed_last_sample(subscriber.out()), 10, what="the subscriber to print the last sample")
+        (python,) = s.run(script)
+        wait_for(lambda: "status" in python.out(), 15, what="the script's late-joiner status line")
+        status = json.loads(python.out().split("status ", 1)[1].splitlines()[0])
+        assert status["sysid"] == 1 and status["k"] == STEPS - 1, python.failure("not the last sample's status")
+        every, alarm, timed = s.run(bundled, background=True)
+        s.again(flight)
+        alarm.wait(20)
+        timed.wait(20)
+        wait_for(lambda: f"\n1 {STEPS - 1} " in python.out(), 10, what="the script to print the second flight")
+        os.killpg(every.proc.pid, signal.SIGTERM)  # as systemd stops it: exit 0 too
+        assert every.proc.wait(15) == 0, every.failure("exit code after SIGTERM")
+        s.stop()
+        s.assert_ran_all("router")
+    assert _json_lines(alarm.out())[0]["state"] == "raised", alarm.failure("no alarm raised")
+    assert _printed_last_sample(every.out()), every.failure("the second flight's last sample is missing")
+    assert _printed_last_sample((s.dir / "estimates.jsonl").read_text()), timed.failure("estimates.jsonl lacks it")
