@@ -12,7 +12,6 @@ import json
 import re
 import signal
 import threading
-import warnings
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
@@ -32,16 +31,14 @@ SLACK = 4  # "within a few samples of the limit"
 
 @pytest.fixture(scope="session")
 def gains_file(tmp_path_factory) -> Path:
-    """The default certified design for paper-continuous (what `fault-monitor design` writes), once per session."""
-    from monitor.design import run_design
+    """The default certified design for paper-continuous (what `fault-monitor design` writes), once per session
+    (the design itself once for both workers: ``tests/designs.py``)."""
     from monitor.gains import write_gains
-    from monitor.model.plant import load_plant
+    from tests.designs import designed
 
-    plant = load_plant("paper-continuous")
+    plant, result = designed("paper-continuous", "certified")
     path = tmp_path_factory.mktemp("gains") / "certified.toml"
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        write_gains(path, run_design("certified", plant), plant)
+    write_gains(path, result, plant)
     return path
 
 
