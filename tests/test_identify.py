@@ -381,7 +381,8 @@ def test_sysid_h_and_tau_max_options(c172p_flight, tmp_path: Path) -> None:
     plant = load_plant(out)
     assert plant.h == pytest.approx(0.1) and plant.tau_max == pytest.approx(0.04)
     assert report["samples"]["log"] == 650 and report["fit_percent"]["alpha"] > 90
-    for argv, words in ((("--h", "0.07"), "whole multiple"), (("--tau-max", "0.05"), "tau_max < h"),
+    for argv, words in ((("--h", "0.07"), "whole multiple"), (("--tau-min", "0.2", "--tau-max", "0.1"), "tau_min <= tau_max"),
+                        (("--tau-max", "0.5"), "at most 3"),
                         (("--sysid", "2"), "missing signals")):
         code, _o, stderr = _identify(str(c172p_flight["log"]), "--out", str(out), *argv)
         assert code == 2 and words in stderr and len(stderr.strip().splitlines()) == 1, stderr

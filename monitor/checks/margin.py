@@ -41,9 +41,22 @@ def _try(plant: Plant, tau_max: float, options: dict) -> tuple[Plant, DesignResu
         return variant, None
 
 
+def search_ceiling(plant: Plant, up_to: float | None = None) -> float:
+    """The top of the bisection: ``up_to``, else just below h for a plant within one sample, and for a plant whose
+    interval already reaches past h the most whole samples a certificate can span from its ``tau_min``."""
+    if up_to is not None:
+        return float(up_to)
+    if plant.lags is None:
+        return plant.h * (1.0 - 1e-6)
+    from monitor.model.long_delay import MAX_LAG_PARTS
+
+    return (plant.lags.first + MAX_LAG_PARTS) * plant.h * (1.0 - 1e-6)
+
+
 def delay_margin(plant: Plant, tolerance: float | None = None, curve_points: int = 6,
-                 progress: Callable[[str], None] | None = None, **options) -> Margin:
-    """Bisection on ``tau_max`` in ``[tau_min, h)`` to ``tolerance`` (default h/200), then the curve below it."""
+                 progress: Callable[[str], None] | None = None, up_to: float | None = None, **options) -> Margin:
+    """Bisection on ``tau_max`` in ``[tau_min, search_ceiling)`` to ``tolerance`` (default h/200), then the curve
+    below it. Past h each probe is a lagged plant (``monitor.model.long_delay``)."""
     say = progress or (lambda _text: None)
     tol = tolerance if tolerance is not None else plant.h / 200.0
     probes = 0
@@ -52,7 +65,7 @@ def delay_margin(plant: Plant, tolerance: float | None = None, curve_points: int
     if lo_design is None:
         raise UserError(f"no certified design for plant '{plant.name}' even with a constant delay tau = {plant.tau_min}: "
                         "no delay margin")
-    lo, hi = plant.tau_min, plant.h * (1.0 - 1e-6)
+    lo, hi = plant.tau_min, search_ceiling(plant, up_to)
     hi_plant, hi_design = _try(plant, hi, options)
     probes += 1
     if hi_design is not None:

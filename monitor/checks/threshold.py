@@ -38,7 +38,7 @@ import numpy as np
 import scipy.linalg
 
 from monitor.model.closed_loop import Gains, closed_loop, steady_state
-from monitor.model.delay_model import b0_of_tau, b0_polytope, tau_grid
+from monitor.model.delay_model import b0_of_tau, b0_polytope, tau_grid, nominal_point
 from monitor.errors import UserError
 from monitor.checks.norms import dual_norms, induced_norms, norm_factor
 from monitor.model.plant import Plant
@@ -129,7 +129,7 @@ def fault_threshold(plant: Plant, gains: Gains, disturbance_bound: float) -> Thr
     A = np.array([lp.A for lp in loops])
     B = loops[0].B[:, : plant.p]  # d columns; B does not depend on the delay
     C = loops[0].C_ef
-    nominal = closed_loop(plant, gains, plant.B0, steady=steady).A
+    nominal = closed_loop(plant, gains, nominal_point(plant), steady=steady).A
     if np.max(np.abs(np.linalg.eigvals(nominal))) >= 1.0:
         raise UserError("no threshold: the loop is unstable at the nominal delay (see fault-monitor verify)")
     started = time.perf_counter()

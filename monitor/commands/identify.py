@@ -72,8 +72,11 @@ def register(subparsers) -> None:
                         "(default: longitudinal)")
     p.add_argument("--h", type=float, metavar="S", help="sampling period of the plant, a whole multiple of the "
                    "log's own sample spacing (default: that spacing, from the instant message's time stamps)")
+    p.add_argument("--tau-min", type=float, metavar="S", default=0.0, help="lower bound of the network delay "
+                   "written to the plant (default: 0)")
     p.add_argument("--tau-max", type=float, metavar="S", help="upper bound of the network delay written to the "
-                   "plant, 0 <= S < h (default: 0.46 h)")
+                   "plant (default: 0.46 h); it may reach past h (a radio or cellular link): the monitor then "
+                   "carries the commands in flight in its state")
     p.add_argument("--actuator-limit", type=float, metavar="DEG", default=DEFAULT_ACTUATOR_LIMIT,
                    help="elevator limit about trim written to [actuator] (default: 25.0; a log shows the "
                         "deflections flown, not the aircraft's stops)")
@@ -163,6 +166,7 @@ class IdentifyRequest:
     model: str = "longitudinal"
     h: float | None = None
     tau_max: float | None = None
+    tau_min: float = 0.0
     actuator_limit: float = DEFAULT_ACTUATOR_LIMIT
     signals: str | None = None
     sysid: int | None = None
@@ -195,7 +199,7 @@ class IdentifiedLog:
         """``--json``'s document."""
         r, f = self.request, self.flight
         return {"source_log": str(r.log), "sysid": self.sysid, "model": r.model, "out": str(r.out),
-                "name": r.plant_name, "tau_max": self.tau_max, "actuator_limit": r.actuator_limit,
+                "name": r.plant_name, "tau_min": r.tau_min, "tau_max": self.tau_max, "actuator_limit": r.actuator_limit,
                 **self.result.report(),
                 "log": {"records": f.records, "skipped_bytes": f.skipped_bytes, "truncated": f.truncated,
                         "seconds": round(self.seconds, 3), **f.counters, "inventory": f.inventory.as_dict()}}
@@ -215,7 +219,10 @@ def _checked(req: IdentifyRequest) -> None:
 
 
 def _periods(req: IdentifyRequest, smap, dlog=None) -> tuple[float, int, float]:
-    """``(h_read, ratio, tau_max)``: the log's own spacing, the decimation to the plant's h, and the delay bound."""
+    """``(h_read, ratio, tau_max)``: the log's own spacing, the decimation to the plant's h, and the delay bound.
+
+    The bounds are checked by the plant's own rules when the file is read back (``0 <= tau_min <= tau_max``,
+    at most a few whole samples apart)."""
     from monitor.errors import UserError
 
     spacing = log_spacing(req.log, smap.instant, req.sysid, dataflash=dlog)
@@ -226,9 +233,9 @@ def _periods(req: IdentifyRequest, smap, dlog=None) -> tuple[float, int, float]:
         if ratio < 1 or abs(req.h - ratio * spacing) > 1e-6 * req.h:
             raise UserError(f"--h {req.h:g} s must be a whole multiple of the log's sample spacing {spacing:g} s")
     h = h_read * ratio
-    if req.tau_max is not None and not (math.isfinite(req.tau_max) and 0 <= req.tau_max < h):
-        raise UserError(f"--tau-max must satisfy 0 <= tau_max < h = {h:g} s, got {req.tau_max}")
-    tau_max = req.tau_max if req.tau_max is not None else round(TAU_MAX_FRACTION * h, 9)
+    tau_max = req.tau_max if req.tau_max is not None else max(round(TAU_MAX_FRACTION * h, 9), req.tau_min)
+    if not (math.isfinite(req.tau_min) and math.isfinite(tau_max) and 0 <= req.tau_min <= tau_max):
+        raise UserError(f"--tau-min/--tau-max must satisfy 0 <= tau_min <= tau_max, got {req.tau_min}, {tau_max}")
     return h_read, ratio, tau_max
 
 
@@ -322,7 +329,7 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
     description = (f"{req.model} model identified from {Path(req.log).name}: {result.samples} samples at "
                    f"h = {h:g} s, held-out fit "
                    + ", ".join(f"{s} {f:.1f} %" for s, f in result.fit_validation.items()))
-    text = plant_toml(result, name=name, description=description, tau_max=tau_max,
+    text = plant_toml(result, name=name, description=description, tau_min=req.tau_min, tau_max=tau_max,
                       actuator_limit=req.actuator_limit, actuator_limit_source=limit_source, signals=written,
                       source_log=str(req.log), model=req.model, header=header)
     parse_plant(text, source=str(out))  # the file must load as it is: a plant the chain takes
@@ -335,13 +342,14 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
 
 def run(args: argparse.Namespace) -> int:
     req = IdentifyRequest(log=args.tlog, out=args.out, model=args.model, h=args.h, tau_max=args.tau_max,
+                          tau_min=args.tau_min,
                           actuator_limit=args.actuator_limit, signals=args.signals, sysid=args.sysid, name=args.name)
     done = identify_log(req, say=lambda text: print(f"identify: {text}", file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps(done.report()))
         return 0
     print(_format(done.result, req.log, done.sysid, req.model, done.units))
-    print(f"wrote {req.out}: tau in [0, {done.tau_max:g}] s, actuator limit {req.actuator_limit:g} deg "
+    print(f"wrote {req.out}: tau in [{req.tau_min:g}, {done.tau_max:g}] s, actuator limit {req.actuator_limit:g} deg "
           f"({'given' if req.actuator_limit != DEFAULT_ACTUATOR_LIMIT else 'default'}); "
           f"{done.flight.records} log records in {done.seconds:.2f} s")
     for line in done.flight.inventory.lines():

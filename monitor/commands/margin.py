@@ -12,7 +12,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "margin",
         help="how much network delay the loop can take: the largest certifiable tau_max, and the cost curve",
         description=(
-            "How much delay could the loop take? Bisect on the upper delay bound tau_max in [tau_min, h): at each\n"
+            "How much delay could the loop take? Bisect on the upper delay bound tau_max in [tau_min, h) (or up to\n"
+            "--up-to S, which may reach past h, where the monitor carries the commands in flight): at each\n"
             "probe design the certified gains for the plant with that interval and keep the probe only if its\n"
             "certificate holds. Prints the margin and the curve gamma_e(tau_max) below it; --out writes the gains at\n"
             "the margin (designed for [tau_min, tau_max]; run them with a plant file carrying that tau_max)."
@@ -24,6 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="certified design objective used at each probe (default: fast)")
     parser.add_argument("--tolerance", type=float, default=None, metavar="S",
                         help="stop bisecting when the bracket is narrower than S seconds (default: h/200)")
+    parser.add_argument("--up-to", type=float, default=None, metavar="S",
+                        help="search tau_max up to S seconds, past h if you like (default: h for a plant within one "
+                             "sample; 3 whole samples above tau_min for a plant whose interval already reaches past h)")
     parser.add_argument("--points", type=int, default=6, metavar="N", help="points of the gamma_e curve (default: 6)")
     parser.add_argument("--json", action="store_true",
                         help='print {"tau_max": ..., "curve": [{"tau_max": ..., "gamma_e": ...}, ...], "no_certificate_at": '
@@ -42,12 +46,22 @@ def run(args: argparse.Namespace) -> int:
     plant = load_plant(args.plant)
     if args.tolerance is not None and not 0 < args.tolerance < plant.h:
         raise UserError(f"--tolerance must be in (0, h = {plant.h}), got {args.tolerance}")
+    if args.up_to is not None:
+        from monitor.model.long_delay import MAX_LAG_PARTS, lag_span
+
+        first, last = lag_span(plant.h, plant.tau_min, args.up_to)
+        if not plant.tau_min < args.up_to or last - first + 1 > MAX_LAG_PARTS:
+            raise UserError(f"--up-to must be above the plant's tau_min = {plant.tau_min:g} s and within "
+                            f"{MAX_LAG_PARTS} whole samples of it (h = {plant.h:g} s), got {args.up_to}")
     if args.points < 2:
         raise UserError(f"--points must be >= 2, got {args.points}")
     say = lambda text: print(text, file=sys.stderr, flush=True)  # noqa: E731
-    say(f"bisecting tau_max in [{plant.tau_min}, {plant.h}) for plant '{plant.name}' ({args.objective} design at each probe)")
+    from monitor.checks.margin import search_ceiling
+
+    top = search_ceiling(plant, args.up_to)
+    say(f"bisecting tau_max in [{plant.tau_min}, {top:g}) for plant '{plant.name}' ({args.objective} design at each probe)")
     margin = delay_margin(plant, tolerance=args.tolerance, curve_points=args.points, progress=say,
-                          objective=args.objective)
+                          objective=args.objective, up_to=args.up_to)
     if args.out:
         write_gains(args.out, margin.design, margin.plant)
     if args.png:

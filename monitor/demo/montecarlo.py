@@ -69,6 +69,9 @@ def simulate(plant: Plant, gains: Gains, steps: int, fault, delay, wind_values,
         raise UserError("the Monte-Carlo mode simulates additive faults only (bias, ramp); loe/stuck need sim-vehicle")
     if plant.actuator.rate_limit is not None:
         raise UserError("the Monte-Carlo mode does not model a rate-limited elevator; run the live demo (sim-vehicle)")
+    if plant.lags is not None:
+        raise UserError("the Monte-Carlo mode simulates delays within one sample; for a plant whose tau_max reaches "
+                        "past h, fly sim-vehicle (it applies each command when it arrives)")
     est = Estimator(plant, gains)  # saturates its commands at the actuator limit, as the live monitor does
     state = est.initial_state()
     x = np.zeros(plant.n)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
+from monitor.model.delay_model import nominal_point
 from monitor.model.closed_loop import Gains, closed_loop, steady_state
 from monitor.design.lmi_blocks import brl_margin
 from monitor.design.solve import EPS, Solved, SolveFailed, solve_checked
@@ -64,7 +65,7 @@ class CertificateLMI:
     def __init__(self, plant: Plant, vertices: list[np.ndarray]) -> None:
         self.plant = plant
         self.vertices = vertices
-        probe = closed_loop(plant, Gains.zero(plant), plant.B0,
+        probe = closed_loop(plant, Gains.zero(plant), nominal_point(plant),
                             steady=(np.zeros((plant.n, plant.q)), np.zeros((plant.m, plant.q))))
         self.C_ef, self.C_y = probe.C_ef, probe.C_y
 

@@ -30,7 +30,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from monitor.model.closed_loop import Gains, closed_loop, fault_cancelling_K3, observer_indices, steady_state
-from monitor.model.delay_model import b0_polytope
+from monitor.model.delay_model import b0_polytope, nominal_point
 from monitor.design.lmi_blocks import brl_margin, hinf_slack_lmi
 from monitor.design.result import DesignResult
 from monitor.design.solve import SEARCH_PATHS, Solved, SolveFailed, solve_checked
@@ -84,7 +84,7 @@ class ObserverLMI:
         G = self._E_o @ self.G_o @ self._E_o.T + T_c @ self.G_c @ T_c.T
         self.A_params = [cp.Parameter((N, N)) for _ in vertices]
         self.B_params = [cp.Parameter((N, nw)) for _ in vertices]
-        loop0 = closed_loop(plant, Gains.zero(plant), plant.B0, steady=(np.zeros((n, q)), np.zeros((m, q))))
+        loop0 = closed_loop(plant, Gains.zero(plant), nominal_point(plant), steady=(np.zeros((n, q)), np.zeros((m, q))))
         constraints = []  # P, Q > 0 follow from the -P, -Q diagonal blocks
         correction = self._E_o @ self.W @ C_o  # G^T (A_K - E_o [L; M] C_o) = G^T A_K - E_o W C_o
         for A_i, B_i in zip(self.A_params, self.B_params):

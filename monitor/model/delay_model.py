@@ -26,7 +26,7 @@ from monitor.model.long_delay import lag_intervals, lag_point, lag_realization
 from monitor.model.plant import ContinuousModel, Plant
 
 __all__ = ["b0_of_tau", "tau_grid", "b0_polytope", "curve_model", "input_sum", "delta_summary", "lag_curve",
-           "realization", "point_size"]
+           "realization", "point_size", "nominal_point"]
 
 
 def input_sum(plant: Plant) -> np.ndarray:
@@ -67,11 +67,20 @@ def point_size(plant: Plant) -> int:
     return (plant.lags.last - plant.lags.first + 1) * plant.lags.base.B0.size
 
 
+def nominal_point(plant: Plant) -> np.ndarray:
+    """The uncertain point at the nominal delay: ``plant.B0`` for an ordinary plant; what gives the lagged
+    plant's own ``A, B0, B1`` past one sample (where ``plant.B0`` is not a point)."""
+    return plant.B0 if plant.lags is None else b0_of_tau(plant, plant.tau_bar)
+
+
 def realization(plant: Plant, point: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(A, B0, B1)`` that act at one uncertain point: ``(A, B0(tau), B0 + B1 - B0(tau))`` for an ordinary plant."""
     if plant.lags is None:
         return plant.A, point, input_sum(plant) - point
     lags = plant.lags
+    if point.shape != (point_size(plant) // plant.m, plant.m):
+        raise ValueError(f"an uncertain point of this lagged plant is {point_size(plant) // plant.m} x {plant.m}, "
+                         f"got {point.shape[0]} x {point.shape[1]}")
     return lag_realization(point, lags.base.A, _whole_interval(lags.base), lags.first, lags.last)
 
 

@@ -557,6 +557,7 @@ def _round(x: float, digits: int = 6) -> float:
 
 
 def plant_toml(result: Identification, *, name: str, description: str, tau_max: float, actuator_limit: float,
+               tau_min: float = 0.0,
                actuator_limit_source: str, signals: dict[str, Any], source_log: str, model: str,
                header: list[str] | None = None) -> str:
     """The plant file ``fault-monitor design`` / ``run`` take as it is (the README's plant file format).
@@ -571,7 +572,7 @@ def plant_toml(result: Identification, *, name: str, description: str, tau_max: 
     gust = result.A_c[:, [result.state_names.index("alpha")]]
     top: list[tuple[str, Any]] = [
         ("form", "continuous"), ("name", name), ("description", description), ("unit", "deg"),
-        ("h", float(result.h)), ("tau_min", 0.0), ("tau_max", float(tau_max)),
+        ("h", float(result.h)), ("tau_min", float(tau_min)), ("tau_max", float(tau_max)),
         ("A_c", result.A_c), ("B_c", result.B_c), ("D_cf", result.B_c), ("D_cd", gust), ("C", np.eye(n)),
     ]
     lines = [f"# {line}" for line in (header or [])]
