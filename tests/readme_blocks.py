@@ -26,7 +26,7 @@ What the harness rewrites, and nothing else:
   ``fault-monitor run`` without ``--mavlink``: 14550; ``fault-monitor router`` without ``-l``: 7447) has it spelled
   out, with its substitute;
 * speed: ``--steps N`` becomes min(N, steps), ``--speedup S`` max(S, speedup) and subscribe's ``--duration S``
-  min(S, duration), with the values the group's test gives its session;
+  min(S, duration), with the values the group's test gives its session (None: as written), block by block;
 * Python's output is unbuffered (``PYTHONUNBUFFERED=1``), as a terminal shows a script's lines when printed.
 """
 
@@ -39,11 +39,12 @@ import signal
 import socket
 import subprocess
 import sys
+import time
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
 
-from monitor.process import stop_process_group, udp_port_taken
+from monitor.process import udp_port_taken
 from tests.daemons import REPO, free_udp_port, wait_for
 
 README = REPO / "README.md"
@@ -251,8 +252,7 @@ class Session:
 
     def __exit__(self, *exc) -> None:
         for step in reversed(self.steps_run):
-            if step.proc.poll() is None:
-                stop_process_group(step.proc, timeout=5)
+            _end(step, signal.SIGTERM, 5.0)
 
     # the rewrites ---------------------------------------------------------------------------------------------------
     def port(self, readme_port: int) -> int:
@@ -312,9 +312,13 @@ class Session:
     def _start(self, block: Block, line: int, command: str, background: bool) -> Step:
         n = len(self.steps_run)
         out, err = self.logs / f"{n:02d}-L{line}.out", self.logs / f"{n:02d}-L{line}.err"
+        lexer = shlex.shlex(command, posix=True, punctuation_chars=True)
+        lexer.commenters = "#"
+        simple = not {"&&", "||", ";", "|", "&"} & set(lexer)  # one command: bash execs it, so it gets the signals
         with open(out, "wb") as fo, open(err, "wb") as fe:
-            proc = subprocess.Popen(["bash", "-c", command], cwd=self.dir, env=self.env, stdin=subprocess.DEVNULL,
-                                    stdout=fo, stderr=fe, start_new_session=True)
+            proc = subprocess.Popen(["bash", "-c", f"exec {command}" if simple else command], cwd=self.dir,
+                                    env=self.env, stdin=subprocess.DEVNULL, stdout=fo, stderr=fe,
+                                    start_new_session=True)
         step = Step(block, line, command, proc, out, err, background)
         self.steps_run.append(step)
         if background:
@@ -336,12 +340,7 @@ class Session:
     def stop(self) -> None:
         """Ctrl-C in every terminal still running, newest first; the project's daemons must then exit 0."""
         for step in reversed(self.steps_run):
-            if step.proc.poll() is None:
-                os.killpg(step.proc.pid, signal.SIGINT)
-                try:
-                    step.proc.wait(timeout=15 if _OURS.match(step.command) else 3)
-                except subprocess.TimeoutExpired:
-                    stop_process_group(step.proc, timeout=5)
+            _end(step, signal.SIGINT, 15.0 if _OURS.match(step.command) else 3.0)
             step.returncode = step.proc.returncode
             if _OURS.match(step.command):
                 assert step.returncode == 0, step.failure(f"exit code {step.returncode} after Ctrl-C")
@@ -349,6 +348,33 @@ class Session:
     def assert_ran_all(self, name: str) -> None:
         missing = [b.line for b in group(name) if b not in self.blocks_run]
         assert not missing, f"README blocks of group '{name}' at lines {missing} were not run by its test"
+
+
+def _group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def _end(step: Step, first: int, grace: float) -> None:
+    """Signal ``first`` to the step's whole process group and wait up to ``grace`` s for its command; then SIGTERM
+    and SIGKILL whatever of the group is left. Nothing a command started outlives the session."""
+    for sig, wait in ((first, grace), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+        if step.proc.poll() is not None and not _group_alive(step.proc.pid):
+            return
+        try:
+            os.killpg(step.proc.pid, sig)
+        except ProcessLookupError:
+            pass
+        try:
+            step.proc.wait(timeout=wait)
+        except subprocess.TimeoutExpired:
+            pass
+        deadline = time.monotonic() + (wait if step.proc.returncode is not None else 0)
+        while _group_alive(step.proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
 
 
 def check_command_parses(command: str) -> str | None:
