@@ -9,6 +9,12 @@ the unit tests.
 
 Why every other module is a group of its own: a module-scoped fixture (a margin search, a design through the CLI)
 runs once per worker that gets one of the module's tests; spread over two workers it ran twice (16 s each).
+
+How the groups reach xdist: ``--dist loadgroup`` reads ``xdist_group`` marks by appending the group to each test's
+node id, which pytest 9 no longer honours (it keeps node ids elsewhere), so with the pinned pytest 9.2 / xdist 3.8
+every test was scheduled alone: e2e tests ran two at a time and the margin module's fixture ran on both workers
+(45 s each). ``pytest_xdist_make_scheduler`` (xdist's hook) schedules by the same groups directly. The marks stay,
+for ``pytest --markers`` and for an xdist that reads them again.
 """
 
 from __future__ import annotations
@@ -20,18 +26,36 @@ import pytest
 
 from tests.designs import CACHE_ENV
 
-E2E = Path(__file__).parent / "e2e"
+E2E = Path(__file__).resolve().parent / "e2e"
 # end-to-end modules whose verdicts do not hang on the wall-clock pace of a closed loop (a vehicle alone,
 # seeded draws, warnings, a log read back): they may share the CPU with another test, as unit tests do
 NOT_PACED = {"test_sim_vehicle", "test_router", "test_identify_flight", "test_link_peers", "test_sim_aircraft"}
 
 
+def _group(path: Path) -> str:
+    path = path.resolve()
+    paced = E2E in path.parents and path.stem not in NOT_PACED
+    return "e2e-daemons" if paced else f"module-{path.stem}"
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
-        path = Path(str(item.fspath))
-        paced = E2E in path.parents and path.stem not in NOT_PACED
-        group = "e2e-daemons" if paced else f"module-{path.stem}"
-        item.add_marker(pytest.mark.xdist_group(group))
+        item.add_marker(pytest.mark.xdist_group(_group(Path(str(item.fspath)))))
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log):
+    """With ``--dist loadgroup``: one work unit per group above, found from the node id's file."""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    root = config.rootpath
+
+    class ByGroup(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return _group(root / nodeid.split("::", 1)[0])
+
+    return ByGroup(config, log)
 
 
 @pytest.fixture(scope="session", autouse=True)
