@@ -1,51 +1,46 @@
-"""A delay of one to 2.4 samples, end to end: ``sim-vehicle`` and ``fault-monitor run`` as daemons on loopback.
+"""A delay of one to 2.4 samples end to end, with the README's own blocks (group ``long-delay``).
 
-The monitor runs the lagged plant (``docs/examples/paper-continuous-long-delay.toml``) with its certified gains;
-the vehicle applies each command when it arrives, as many samples late as drawn. Judged on what crossed the
-wire: the estimates and the truth, both read from the Zenoh bus, matched by sample index.
+The README's commands design and verify the lagged plant (``docs/examples/paper-continuous-long-delay.toml``),
+run ``fault-monitor run`` and ``sim-vehicle run`` as daemons on loopback (``tests/readme_blocks.py``: free ports,
+the flight shortened), and replay the recording. The vehicle applies each command when it arrives, as many
+samples late as drawn. Judged on what crossed the wire: the truth the vehicle published over Zenoh (recorded
+beside the estimates) against the estimates, matched by sample index, and on the replay's report.
 """
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
-from tests.daemons import Daemon, free_udp_port, wait_for
-from tests.e2e.test_monitor_paper import wait_ready, zenoh_bus
+import numpy as np
 
-PLANT = str(Path(__file__).parents[2] / "docs" / "examples" / "paper-continuous-long-delay.toml")
+from tests.daemons import REPO
+from tests.readme_blocks import Session, group
+
 STEPS, ONSET, BIAS = 60, 20, 2.0
 
 
-def test_a_loop_whose_commands_act_one_to_two_samples_late_estimates_and_holds(tmp_path: Path) -> None:
-    from monitor.gains import write_gains
-    from tests.designs import designed
+def test_the_readme_long_delay_blocks_estimate_and_hold(tmp_path: Path) -> None:
+    from monitor.api import read_recording
 
-    plant, result = designed(PLANT, "certified")
-    gains = tmp_path / "long-delay.toml"
-    write_gains(gains, result, plant)
-    port = free_udp_port()
-    with zenoh_bus() as bus:
-        estimates = bus.collect("uav/*/fault/estimate")
-        truth = bus.collect("uav/*/truth")
-        monitor_args = ["run", "--plant", PLANT, "--gains", str(gains), "--mavlink", f"udpin:127.0.0.1:{port}",
-                        "--zenoh-mode", "client", "--zenoh-connect", bus.endpoint, "--name", "long-delay"]
-        with Daemon("monitor", monitor_args, tmp_path / "monitor.log") as monitor:
-            wait_ready(monitor)
-            vehicle_args = ["run", "--plant", "paper-continuous", "--delay", "uniform:1:2.4", "--fault",
-                            f"bias:{BIAS:g}@{ONSET}", "--steps", str(STEPS), "--speedup", "20", "--seed", "5",
-                            "--mavlink", f"udpout:127.0.0.1:{port}", "--zenoh-mode", "client", "--zenoh-connect",
-                            bus.endpoint]
-            with Daemon("sim_vehicle", vehicle_args, tmp_path / "vehicle.log") as vehicle:
-                assert vehicle.wait(60) == 0, vehicle.log()
-            wait_for(lambda: len(estimates) >= STEPS - 2, 10, what="the monitor's estimates")
-        wait_for(lambda: len(truth) >= STEPS, 5, what="every sample's truth")
-    by_k = {e["k"]: e for e in estimates}
-    truths = {t["k"]: t for t in truth}
-    assert len(by_k) >= STEPS - 2 and len(truths) == STEPS, sorted(set(range(STEPS)) - set(by_k))
-    acted = [t["tau"] for t in truths.values() if t["tau"] is not None]
-    assert len(acted) > 0.8 * STEPS and min(acted) >= 1.0 and max(acted) > 2.0, acted  # every one a sample or more late
-    assert sum(t["in_force"] <= t["k"] - 2 for t in truths.values()) > 10  # often u(k-2) or older was in force
-    errors = [abs(by_k[k]["f_hat"][0] - truths[k]["f"][0]) for k in range(ONSET + 6, STEPS) if k in by_k]
+    flight, replay = group("long-delay")
+    with Session(tmp_path, steps=STEPS, speedup=20) as s:
+        shutil.copytree(REPO / "docs" / "examples", s.dir / "docs" / "examples")  # the user is in a clone
+        design, verify, monitor, vehicle = s.run(flight)
+        assert "certificate" in design.out() and "delay      past one sample" in design.out(), design.failure("")
+        assert "STABLE" in verify.out() and "certificate                      valid" in verify.out(), verify.failure("")
+        s.stop()  # Ctrl-C: the monitor writes its recording's footer
+        assert f"samples processed {STEPS}" in monitor.err(), monitor.failure("not every sample processed")
+        (report,) = s.run(replay)
+        assert f"{STEPS} samples" in report.out() and "(from the recorded truth)" in report.out(), report.failure("")
+        s.assert_ran_all("long-delay")
+        series = read_recording(s.dir / "long-delay.rrd").vehicles[1]
+    truth = {r.k: r for r in series.truth}
+    f_hat = {r.k: float(np.ravel(r.f_hat)[0]) for r in series.samples}
+    assert len(truth) >= STEPS - 2 and len(f_hat) == STEPS
+    acted = [r.tau for r in truth.values() if r.tau is not None]
+    assert len(acted) > 0.8 * STEPS and min(acted) >= 1.0 and max(acted) > 2.0, acted  # all a sample or more late
+    errors = [abs(f_hat[k] - truth[k].f[0]) for k in range(ONSET + 6, STEPS) if k in truth]
     assert max(errors) <= 0.05 * BIAS, max(errors)  # within 5 % of the fault from 6 samples after onset
-    assert max(abs(by_k[k]["f_hat"][0]) for k in range(ONSET) if k in by_k) < 0.05 * BIAS  # nothing before it
-    assert max(abs(t["x"][0]) for t in truths.values()) < 2.0  # the loop holds: alpha stays within 2 deg
+    assert max(abs(f_hat[k]) for k in range(ONSET)) < 0.05 * BIAS  # nothing before it
+    assert max(abs(r.x[0]) for r in truth.values()) < 2.0  # the loop holds: alpha stays within 2 deg
