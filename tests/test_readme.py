@@ -28,6 +28,7 @@ RUN_GROUPS = {
     "mavproxy": "tests/e2e/test_mavproxy.py::test_the_readme_block_closes_the_loop_through_mavproxy",
     "aircraft": "tests/e2e/test_aircraft_chain.py::test_excite_identify_design_and_close_the_loop_on_jsbsim",
     "notebook": "tests/test_api.py::test_the_readme_python_block_runs_as_it_stands_in_a_fresh_directory",
+    "long-delay": "tests/e2e/test_multi_delay_loop.py::test_the_readme_long_delay_blocks_estimate_and_hold",
 }
 
 
@@ -146,6 +147,18 @@ def test_paper_daemons_then_the_replay_of_their_recording(tmp_path: Path) -> Non
         s.assert_ran_all("paper")
 
 
+def _wait_subscribed(endpoint: str, key: str) -> None:
+    """Until a subscriber matches ``key`` (a publisher's matching status; nothing is published)."""
+    from monitor.wire.zenoh_session import build_config, close_quietly, open_session
+
+    session = open_session(build_config(connect=[endpoint], mode="client"))
+    try:
+        publisher = session.declare_publisher(key)
+        wait_for(lambda: publisher.matching_status.matching, 20, what=f"a subscriber to {key}")
+    finally:
+        close_quietly(session)
+
+
 def test_router_its_clients_and_a_python_subscriber(tmp_path: Path, gains_file: Path) -> None:
     """The router block; then, as late joiners, the zenoh-python script and the bundled clients, while the vehicle
     flies again (the same command): each sees the monitor through the router."""
@@ -159,6 +172,7 @@ def test_router_its_clients_and_a_python_subscriber(tmp_path: Path, gains_file: 
         status = json.loads(re.search(r"^status (.*)\n", python.out(), re.M).group(1))
         assert status["sysid"] == 1 and status["k"] == STEPS - 1, python.failure("not the last sample's status")
         every, alarm, timed = s.run(bundled, background=True)
+        _wait_subscribed(f"tcp/127.0.0.1:{s.port(7447)}", "uav/1/fault/alarm")  # else a slow start misses it
         s.again(flight)
         alarm.wait(20)
         timed.wait(20)
@@ -167,6 +181,8 @@ def test_router_its_clients_and_a_python_subscriber(tmp_path: Path, gains_file: 
         assert every.proc.wait(15) == 0, every.failure("exit code after SIGTERM")
         s.stop()
         s.assert_ran_all("router")
-    assert _json_lines(alarm.out())[0]["state"] == "raised", alarm.failure("no alarm raised")
+    raised = _json_lines(alarm.out())
+    assert len(raised) == 1 and raised[0]["state"] == "raised", alarm.failure("not one alarm, then exit (--count 1)")
     assert _printed_last_sample(every.out()), every.failure("the second flight's last sample is missing")
+    assert {e["sysid"] for e in _json_lines(every.out())} == {1}
     assert _printed_last_sample((s.dir / "estimates.jsonl").read_text()), timed.failure("estimates.jsonl lacks it")
