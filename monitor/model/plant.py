@@ -29,15 +29,16 @@ import numpy as np
 from monitor.errors import UserError
 from monitor.model.discretize import ContinuousModel, discretize
 
-__all__ = ["Plant", "Lags", "ContinuousModel", "Actuator", "load_plant", "parse_plant", "plant_from_table", "with_tau_max", "preset_names"]
+__all__ = ["Plant", "Lags", "Disturbance", "ContinuousModel", "Actuator", "load_plant", "parse_plant", "plant_from_table", "with_tau_max", "preset_names"]
 
 PRESETS = {"paper": "paper.toml", "paper-continuous": "paper-continuous.toml"}
 
-_COMMON_KEYS = {"form", "name", "description", "unit", "h", "tau_min", "tau_max", "C", "actuator", "signals",
+_COMMON_KEYS = {"form", "name", "description", "unit", "h", "tau_min", "tau_max", "C", "actuator", "disturbance", "signals",
                 "identification"}
 _CONTINUOUS_KEYS = _COMMON_KEYS | {"A_c", "B_c", "D_cf", "D_cd"}
 _DISCRETE_KEYS = _COMMON_KEYS | {"A", "B0", "B1", "Df", "Dd", "delta", "E"}
 _ACTUATOR_KEYS = {"limit", "rate_limit"}
+_DISTURBANCE_KEYS = {"sigma", "time_constant", "turbulence", "source"}
 # tables that say nothing about the dynamics: left out of the digest, so gains stay valid when they are edited.
 # [identification] is what `fault-monitor identify` found (source log, fit, modes): information, never maths.
 _NOT_DYNAMICS = ("signals", "identification")
@@ -49,6 +50,21 @@ class Actuator:
 
     limit: float | None = None
     rate_limit: float | None = None
+
+
+@dataclass(frozen=True)
+class Disturbance:
+    """The air the plant flies in: the input ``d`` (through ``D_cd``/``Dd``) as a first-order Gauss-Markov process.
+
+    ``d' = -d / time_constant + white noise``, with standard deviation ``sigma`` (plant units): what a gust field
+    looks like through one input at one flight condition (a Dryden vertical gust, seen as an angle of attack,
+    is close to it). ``fault-monitor identify`` measures it from a flight in turbulence; the smooth design
+    objective and ``detectability`` use it. ``turbulence`` names the level it was measured in (information).
+    """
+
+    sigma: float
+    time_constant: float
+    turbulence: str | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,6 +92,7 @@ class Plant:
     unit: str = "deg"
     description: str = ""
     actuator: Actuator = field(default_factory=Actuator)
+    disturbance: Disturbance | None = None  # the [disturbance] table: the gust input's size and spectrum
     source: str = "<memory>"
     digest: str = ""
     signals: dict[str, Any] | None = None  # the raw [signals] table (validated by monitor.link.signals)
@@ -205,6 +222,7 @@ def plant_from_table(raw: dict[str, Any], source: str) -> Plant:
         unit=str(raw.get("unit", "deg")),
         description=str(raw.get("description", "")),
         actuator=reader.actuator(),
+        disturbance=reader.disturbance(),
         source=source,
         digest=_digest({k: v for k, v in raw.items() if k not in _NOT_DYNAMICS}),
         signals=raw.get("signals"),
@@ -255,7 +273,8 @@ def _lagged_plant(raw: dict[str, Any], source: str, h: float, tau_min: float, ta
     A, B0, B1 = lag_realization(nominal, base.A, curve(0.0), first, last)
     C, Df, Dd = lagged_matrices(base.C, base.Df, base.Dd, base.m, last)
     return Plant(name=base.name, form=base.form, h=h, tau_min=tau_min, tau_max=tau_max, A=A, B0=B0, B1=B1, C=C,
-                 Df=Df, Dd=Dd, unit=base.unit, description=base.description, actuator=base.actuator, source=source,
+                 Df=Df, Dd=Dd, unit=base.unit, description=base.description, actuator=base.actuator,
+                 disturbance=base.disturbance, source=source,
                  digest=_digest({k: v for k, v in raw.items() if k not in _NOT_DYNAMICS}), signals=base.signals,
                  raw=raw, lags=Lags(base=base, first=first, last=last))
 
@@ -302,6 +321,22 @@ class _Reader:
         if cols is not None and arr.shape[1] != cols:
             raise self._fail(key, f"must have {cols} column(s), got shape {arr.shape[0]}x{arr.shape[1]}")
         return arr
+
+    def disturbance(self) -> Disturbance | None:
+        if "disturbance" not in self.raw:
+            return None
+        table = self.raw["disturbance"]
+        if not isinstance(table, dict):
+            raise self._fail("disturbance", "must be a table ([disturbance] with sigma and time_constant)")
+        unknown = sorted(set(table) - _DISTURBANCE_KEYS)
+        if unknown:
+            raise self._fail(f"disturbance.{unknown[0]}",
+                             f"is unknown (allowed: {', '.join(sorted(_DISTURBANCE_KEYS))})")
+        sub = _Reader(table, self.source)
+        level = table.get("turbulence")
+        return Disturbance(sigma=sub.scalar("sigma", positive=True),
+                           time_constant=sub.scalar("time_constant", positive=True),
+                           turbulence=None if level is None else str(level))
 
     def actuator(self) -> Actuator:
         table = self.raw.get("actuator", {})
