@@ -77,6 +77,9 @@ def register(subparsers) -> None:
     p.add_argument("--tau-max", type=float, metavar="S", help="upper bound of the network delay written to the "
                    "plant (default: 0.46 h); it may reach past h (a radio or cellular link): the monitor then "
                    "carries the commands in flight in its state")
+    p.add_argument("--turbulence", metavar="LEVEL", help="the turbulence the flight met (none, light, moderate, "
+                   "severe), written beside the gust measured from the log ([disturbance]); information for "
+                   "detectability, which scales the gust to other levels")
     p.add_argument("--actuator-limit", type=float, metavar="DEG", default=DEFAULT_ACTUATOR_LIMIT,
                    help="elevator limit about trim written to [actuator] (default: 25.0; a log shows the "
                         "deflections flown, not the aircraft's stops)")
@@ -167,6 +170,7 @@ class IdentifyRequest:
     h: float | None = None
     tau_max: float | None = None
     tau_min: float = 0.0
+    turbulence: str | None = None
     actuator_limit: float = DEFAULT_ACTUATOR_LIMIT
     signals: str | None = None
     sysid: int | None = None
@@ -216,6 +220,9 @@ def _checked(req: IdentifyRequest) -> None:
         raise UserError(f"--h must be a positive number of seconds, got {req.h}")
     if not (math.isfinite(req.actuator_limit) and req.actuator_limit > 0):
         raise UserError(f"--actuator-limit must be a positive number of degrees, got {req.actuator_limit}")
+    levels = ("none", "light", "moderate", "severe")
+    if req.turbulence is not None and req.turbulence not in levels:
+        raise UserError(f"--turbulence must be one of {', '.join(levels)}, got {req.turbulence!r}")
 
 
 def _periods(req: IdentifyRequest, smap, dlog=None) -> tuple[float, int, float]:
@@ -330,6 +337,7 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
                    f"h = {h:g} s, held-out fit "
                    + ", ".join(f"{s} {f:.1f} %" for s, f in result.fit_validation.items()))
     text = plant_toml(result, name=name, description=description, tau_min=req.tau_min, tau_max=tau_max,
+                      turbulence=req.turbulence,
                       actuator_limit=req.actuator_limit, actuator_limit_source=limit_source, signals=written,
                       source_log=str(req.log), model=req.model, header=header)
     parse_plant(text, source=str(out))  # the file must load as it is: a plant the chain takes
@@ -342,7 +350,7 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
 
 def run(args: argparse.Namespace) -> int:
     req = IdentifyRequest(log=args.tlog, out=args.out, model=args.model, h=args.h, tau_max=args.tau_max,
-                          tau_min=args.tau_min,
+                          tau_min=args.tau_min, turbulence=args.turbulence,
                           actuator_limit=args.actuator_limit, signals=args.signals, sysid=args.sysid, name=args.name)
     done = identify_log(req, say=lambda text: print(f"identify: {text}", file=sys.stderr, flush=True))
     if args.json:

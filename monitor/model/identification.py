@@ -161,6 +161,7 @@ class Identification:
     validation_run: dict[str, np.ndarray] = field(default_factory=dict, repr=False)  # t, y, y_hat (for plots)
     method: dict[str, Any] = field(default_factory=dict)  # least squares, and the output-error refinement's figures
     notes: list[str] = field(default_factory=list)
+    disturbance: dict[str, float] | None = None  # the gust the flight met: sigma, time_constant (_gust_from_residual)
 
     def report(self) -> dict[str, Any]:
         """A JSON-friendly summary (``fault-monitor identify --json``): strict JSON, a non-finite number is null."""
@@ -180,6 +181,7 @@ class Identification:
             "excitation": dict(self.excitation),
             "validation_span_s": list(self.validation_span_s),
             "method": dict(self.method),
+            "disturbance": self.disturbance,
             "notes": list(self.notes),
         })
 
@@ -506,6 +508,7 @@ def identify(data: FlightData, holdout: float = HOLDOUT) -> Identification:
         present = ~np.isnan(y).any(axis=1)
         return (np.arange(k0, k1)[present] - k[0]) * h, y[present], y_hat[present]
 
+    disturbance = _gust_from_residual(k, X - op_x, U - op_u, A_v, B_v, names, h)
     tv, yv, yv_hat = run(split, end)
     _te, ye, ye_hat = run(start, split)
     fit_v = nrmse_fit(yv, yv_hat)
@@ -524,7 +527,33 @@ def identify(data: FlightData, holdout: float = HOLDOUT) -> Identification:
                     "spread_deg": spread, "lead_in_s": float(t[start] - t[0]) if lead else 0.0,
                     "tail_s": float(t[-1] - t[end] + h) if tail else 0.0},
         validation_span_s=(float(tv[0]) if len(tv) else 0.0, float(tv[-1]) if len(tv) else 0.0),
-        validation_run={"t": tv, "y": yv, "y_hat": yv_hat}, method=method, notes=notes)
+        validation_run={"t": tv, "y": yv, "y_hat": yv_hat}, method=method, notes=notes, disturbance=disturbance)
+
+
+def _gust_from_residual(k: np.ndarray, x: np.ndarray, u: np.ndarray, A_d: np.ndarray, B_d: np.ndarray,
+                        names: tuple[str, ...], h: float) -> dict[str, float] | None:
+    """The gust input the flight met, from the model's one-step residual: ``{"sigma", "time_constant", "samples"}``.
+
+    What the model does not explain from one sample to the next, ``r(k) = x(k+1) - A x(k) - B u(k)``, is projected
+    on the plant's gust direction ``Dd`` (the discretised ``D_cd``, the alpha column of ``A_c``: a vertical gust seen
+    as an angle of attack) by least squares, and the sequence fitted with a first-order Gauss-Markov process: its
+    standard deviation, and the time constant from its lag-one correlation ``a = e^{-h / T}``. In calm air it
+    measures the model's own error (small); in turbulence, the air. None without alpha or with too few pairs.
+    """
+    if "alpha" not in names:
+        return None
+    pairs = np.flatnonzero(np.diff(k) == 1)
+    if len(pairs) < 20:
+        return None
+    Dd = (A_d - np.eye(len(names)))[:, [names.index("alpha")]]  # Gamma(h) A_c e_alpha = (e^{A_c h} - I) e_alpha
+    residual = x[pairs + 1] - x[pairs] @ A_d.T - u[pairs] @ B_d.T
+    d = np.linalg.lstsq(Dd, residual.T, rcond=None)[0][0]
+    d = d - d.mean()
+    sigma = float(np.std(d))
+    consecutive = np.flatnonzero(np.diff(pairs) == 1)
+    a = float(np.corrcoef(d[consecutive], d[consecutive + 1])[0, 1]) if len(consecutive) > 10 and sigma > 0 else 0.0
+    time_constant = -h / math.log(a) if 0.0 < a < 1.0 else h  # white (or anti-correlated) at this sampling: one sample
+    return {"sigma": sigma, "time_constant": float(time_constant), "samples": int(len(pairs))}
 
 
 # --- the plant file ---------------------------------------------------------------------------------------------
@@ -557,7 +586,7 @@ def _round(x: float, digits: int = 6) -> float:
 
 
 def plant_toml(result: Identification, *, name: str, description: str, tau_max: float, actuator_limit: float,
-               tau_min: float = 0.0,
+               tau_min: float = 0.0, turbulence: str | None = None,
                actuator_limit_source: str, signals: dict[str, Any], source_log: str, model: str,
                header: list[str] | None = None) -> str:
     """The plant file ``fault-monitor design`` / ``run`` take as it is (the README's plant file format).
@@ -578,6 +607,13 @@ def plant_toml(result: Identification, *, name: str, description: str, tau_max: 
     lines = [f"# {line}" for line in (header or [])]
     lines += [f"{key} = {_value(value)}" for key, value in top]
     lines += ["", "[actuator]", f"limit = {_value(float(actuator_limit))}   # deg, {actuator_limit_source}"]
+    if result.disturbance is not None and result.disturbance["sigma"] > 0:
+        lines += ["", "[disturbance]", "# the gust input d (through D_cd) the flight met, as a first-order Gauss-Markov "
+                  "process: what", "# the model's one-step residual shows along D_cd (calm air: the model's own error)",
+                  f"sigma = {_value(_round(result.disturbance['sigma']))}   # deg",
+                  f"time_constant = {_value(_round(result.disturbance['time_constant']))}   # s"]
+        if turbulence is not None:
+            lines.append(f"turbulence = {_value(turbulence)}   # the level flown (sim-vehicle --turbulence)")
     lines += ["", "[signals]"]
     plain = {key: v for key, v in signals.items() if not isinstance(v, dict)}
     for key, value in plain.items():
