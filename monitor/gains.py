@@ -25,7 +25,7 @@ __all__ = ["GainsFile", "write_gains", "read_gains", "parse_gain_matrix"]
 
 GAIN_NAMES = ("L", "M", "K1", "K2", "K3")
 _GAINS_KEYS = set(GAIN_NAMES) | {"method", "objective", "max_losses", "gamma_e", "gamma_z", "plant_hash", "plant",
-                                 "bounds_apply_to"}
+                                 "bounds_apply_to", "fault_time_constant"}
 _TOP_KEYS = {"gains", "solver", "certificate", "notes"}
 
 
@@ -41,6 +41,17 @@ class GainsFile:
     @property
     def method(self) -> str:
         return str(self.meta.get("method", "unknown"))
+
+    @property
+    def fault_time_constant(self) -> float | None:
+        """Seconds of the low-pass on the reported f_hat (``monitor.model.estimator``); None: reported as estimated."""
+        value = self.meta.get("fault_time_constant")
+        if value is None:
+            return None
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+            raise UserError(f"{self.source}: key 'gains.fault_time_constant' must be a positive number of seconds, "
+                            f"got {value!r}")
+        return float(value)
 
     def check_plant(self, plant: Plant) -> None:
         """Refuse gains whose shapes do not fit; a hash mismatch is the caller's to report."""
@@ -68,6 +79,7 @@ def write_gains(path: str | Path, result: DesignResult, plant: Plant) -> None:
             "plant_hash": plant.digest,
             **({"objective": result.objective} if result.objective else {}),
             **({"max_losses": result.max_losses} if result.max_losses else {}),
+            **({"fault_time_constant": float(result.fault_time_constant)} if result.fault_time_constant else {}),
         },
         "solver": {
             **({"path": result.solved.path, "status": result.solved.status,

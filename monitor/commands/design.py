@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import warnings
 
@@ -32,6 +33,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--mismatch", type=float, default=None, metavar="E",
                         help="fast objective: energy of e_f a unit step fault may leave after the two deadbeat samples "
                              "at the interval's ends (default: 0.01; larger trades settling for output regulation)")
+    parser.add_argument("--fault-time-constant", type=float, default=None, metavar="S",
+                        help="report f_hat low-passed with this time constant in seconds, for the alarm and every "
+                             "user of the estimate (the loop keeps the raw estimate); 0: report it raw (default: "
+                             "1 s for a plant whose [disturbance] table names a turbulence level, e.g. one written by identify "
+                             "--turbulence light, else 0)")
     parser.add_argument("--max-losses", type=int, default=0, metavar="N",
                         help="also certify stability through up to N consecutive lost samples or lost/late commands "
                              "(any mix, any delays in the interval); the design fails if no certificate exists "
@@ -65,6 +71,10 @@ def run(args: argparse.Namespace) -> int:
         if args.method != "certified" or args.objective == "hinf" or not args.mismatch > 0:
             raise UserError("--mismatch takes a number > 0 and applies to the fast certified design only")
         options["mismatch"] = args.mismatch
+    if args.fault_time_constant is not None:
+        if not (math.isfinite(args.fault_time_constant) and args.fault_time_constant >= 0):
+            raise UserError(f"--fault-time-constant must be >= 0 seconds, got {args.fault_time_constant}")
+        options["fault_time_constant"] = args.fault_time_constant
     plant = load_plant(args.plant)
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     say(f"designing ({args.method}) for plant '{plant.name}' ({plant.source}), tau in [{plant.tau_min}, {plant.tau_max}] s ...")

@@ -61,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
 
     plant = load_plant(args.plant)
     certificate, gamma_e, gamma_z, method, warning, assumed = {}, None, None, "inline", None, []
+    filtering = None
     if args.gains:
         if any(getattr(args, n) is not None for n in ("L", "M", "K1", "K2", "K3")):
             raise UserError("give either --gains FILE or inline gains (--L, --M, --K1, ...), not both")
@@ -68,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
         gf.check_plant(plant)
         gains, certificate, method = gf.gains, gf.certificate, gf.method
         gamma_e, gamma_z = gf.meta.get("gamma_e"), gf.meta.get("gamma_z")
+        filtering = gf.fault_time_constant
         if gf.meta.get("plant_hash") not in (None, plant.digest):
             warning = f"gains were designed for another plant ({gf.meta.get('plant')}); checking them on {plant.source}"
             certificate = {}
@@ -87,8 +89,10 @@ def run(args: argparse.Namespace) -> int:
         from monitor.checks.verify_losses import verify_losses
 
         losses = verify_losses(plant, gains, args.max_losses, certificate or None)
+    reported = _reported(verdict, plant, filtering)
     if args.json:
         out = {k: (None if isinstance(v, float) and math.isinf(v) else v) for k, v in verdict.as_dict().items()}
+        out.update(fault_time_constant=filtering, reported_error_bound=reported)
         out.update(method=method, plant=plant.source, warning=warning, assumed=assumed,
                    gains={n: getattr(gains, n).tolist() for n in _GAIN_NAMES})
         if losses is not None:
@@ -98,11 +102,23 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(out))
     else:
         _print_table(verdict, plant, method, warning, gains, assumed, losses)
+        if filtering:
+            print(f"{'reported f_hat':<32} low-passed, T = {filtering:g} s: error gain <= {reported:.4f} "
+                  "(the H-inf w -> e_f bound above plus the filter's lag)")
     ok = verdict.stable and (losses is None or losses.stable is True)
     return 0 if ok else 1
 
 
 _GAIN_NAMES = ("L", "M", "K1", "K2", "K3")
+
+
+def _reported(verdict, plant, filtering: float | None) -> float | None:
+    """The reported estimate's error gain when the gains file low-passes it (from verify's own H-inf figure)."""
+    from monitor.design import reported_error_bound
+
+    if not filtering or math.isinf(verdict.hinf_ef):
+        return None
+    return reported_error_bound(verdict.hinf_ef, plant.h, filtering)
 
 
 def _print_table(v, plant, method: str, warning: str | None, gains, assumed: list[str], losses=None) -> None:

@@ -27,6 +27,7 @@ class DesignResult:
     objective: str | None = None  # certified designs: "fast" or "hinf"
     max_losses: int = 0  # the certificate also covers every pattern with at most this many consecutive losses
     solved: Solved | None = None  # how the design's last LMI was solved and checked; None: no LMI (hand-written gains)
+    fault_time_constant: float | None = None  # s: the reported f_hat is the estimate low-passed (None: as estimated)
 
     @property
     def solver_path(self) -> str:

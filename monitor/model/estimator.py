@@ -13,7 +13,12 @@ With an operating point (a plant identified about a trim, monitor/link/signals.p
 deviation from it (y - y0, u - u0); only the saturation knows u0: the limit holds for u0 + u.
 
 ``f_hat(k)`` (the estimate that went into ``u(k)``) is what is reported for sample k, so that
-``e_f(k) = f(k) - f_hat(k)`` lines up with the truth at the same k.
+``e_f(k) = f(k) - f_hat(k)`` lines up with the truth at the same k. With a ``fault_time_constant`` T (the gains
+file's, ``fault-monitor design --fault-time-constant``), the *reported* estimate is that one low-passed,
+``f_rep(k) = a f_rep(k-1) + (1 - a) f_hat(k)``, ``a = e^{-h/T}``: the channel a user watches and alarms on gets
+a chosen bandwidth, while the loop (controller and observer) keeps the raw estimate, so its certificate is
+unchanged. Why: in turbulence the deadbeat estimate passes every gust that looks like a fault; a quarter of a
+second of filtering halves its pre-fault peak on a c172p for one sample more of detection delay (README).
 
 Which u(k-1): the contract says the deflection the vehicle *reports* at sample k (``u_prev``), because a
 command that was lost or late never acted; only when no report came does the estimator use its own
@@ -46,6 +51,7 @@ class EstimatorState:
     n: int
     q: int
     k_last: int | None = None
+    f_reported: list[float] | None = None  # the low-passed estimate (fault_time_constant), None: none yet
 
     @property
     def x_hat(self) -> np.ndarray:
@@ -65,7 +71,7 @@ class StepResult:
     k: int
     u: np.ndarray  # the command (saturated) or, observe-only, the reported u(k)
     x_hat: np.ndarray  # estimate at k (before the update)
-    f_hat: np.ndarray  # estimate at k (before the update)
+    f_hat: np.ndarray  # estimate at k (before the update), as reported (low-passed with a fault_time_constant)
     residual: np.ndarray
     skipped: int  # samples predicted open-loop because their telemetry never arrived
     reset: bool = False  # the state had become non-finite and was reset to zero
@@ -82,10 +88,12 @@ class Estimator:
     """
 
     def __init__(self, plant: Plant, gains: Gains, max_gap: int = 50, u_limit: float | None = None,
-                 u0=None) -> None:
+                 u0=None, fault_time_constant: float | None = None) -> None:
         """``u0``: the operating point of the inputs when the plant works in deviations (``u`` here is
         ``u_abs - u0``): the actuator limit holds for the absolute deflection, so ``u`` is saturated to
-        ``[-limit - u0, limit - u0]``. None: zero."""
+        ``[-limit - u0, limit - u0]``. None: zero. ``fault_time_constant``: seconds of the low-pass on the
+        reported estimate (module docstring); None: reported as estimated."""
+        self._keep = math.exp(-plant.h / fault_time_constant) if fault_time_constant else 0.0
         gains.check_shapes(plant)
         self.plant = plant
         self.gains = gains
@@ -178,7 +186,12 @@ class Estimator:
         reset = not all(map(math.isfinite, z_next))
         s.z = np.zeros(self._N) if reset else np.array(z_next)
         s.k_last = k
-        return StepResult(k=k, u=np.array(u), x_hat=np.array(v[:self._n_reported]), f_hat=np.array(v[n:nq]),
+        f_hat = v[n:nq]
+        if self._keep:
+            keep = self._keep
+            previous = s.f_reported if s.f_reported is not None and not reset else [0.0] * len(f_hat)
+            f_hat = s.f_reported = [keep * p + (1.0 - keep) * f for p, f in zip(previous, f_hat)]
+        return StepResult(k=k, u=np.array(u), x_hat=np.array(v[:self._n_reported]), f_hat=np.array(f_hat),
                           residual=np.array(out[nq:]), skipped=self._skipped, reset=reset)
 
     def step(self, s: EstimatorState, k: int, y, u_prev=None, applied: bool | None = None) -> StepResult:

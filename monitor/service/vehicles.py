@@ -91,7 +91,8 @@ def load_model(plant_spec: str | Path, gains_path: str | Path, force: bool = Fal
             if not abs(u0) < limit:
                 raise UserError(f"{signals.source}: [signals] operating_point: '{name}' = {u0:g} is not inside the "
                                 f"actuator limit +-{limit:g} of plant {plant.name}")
-    return VehicleModel(plant, gains, Estimator(plant, gains.gains, u0=signals.u0), signals)
+    return VehicleModel(plant, gains, Estimator(plant, gains.gains, u0=signals.u0,
+                                                fault_time_constant=gains.fault_time_constant), signals)
 
 
 class Fleet:
