@@ -135,35 +135,12 @@ def test_an_interval_spanning_too_many_samples_is_one_line():
 LONG_DELAY_PLANT = str(Path(__file__).parents[1] / "docs" / "examples" / "paper-continuous-long-delay.toml")
 
 
-class _Loop:
-    """The monitor's estimator answering the vehicle's samples at the instant they are sent (no network)."""
-
-    def __init__(self, plant, gains) -> None:
-        from monitor.model.estimator import Estimator
-
-        self.est = Estimator(plant, gains)
-        self.state = self.est.initial_state()
-        self.sim = None
-        self.now = 0.0
-        self.f_hat: dict[int, float] = {}
-        self.truth: dict[int, dict] = {}
-
-    def send_sample(self, sample) -> None:
-        step = self.est.step(self.state, sample.k, [sample.alpha_deg], u_prev=[sample.elevator_deg])
-        self.f_hat[sample.k] = float(step.f_hat[0])
-        self.sim.receive_command(sample.k, float(step.u[0]), self.now)
-
-    def send_heartbeat(self) -> None:
-        pass
-
-    def publish_truth(self, payload: dict) -> None:
-        self.truth[payload["k"]] = payload
-
-
 def test_a_certified_loop_holds_with_every_command_one_to_two_and_a_half_samples_late():
     """uniform:1:2.4 at h = 1 s: no command ever acts in its own interval. The design's certificate is checked
     by verify; the estimate on the vehicle's exact simulation settles within 5 % and stays there."""
+    from monitor.checks.detectability import ClosedLoop
     from monitor.checks.verify import verify_gains
+    from monitor.model.estimator import Estimator
     from monitor.wire.specs import parse_delay_spec, parse_fault_spec
     from sim_vehicle.simulation import Simulation
     from tests.designs import designed
@@ -172,14 +149,10 @@ def test_a_certified_loop_holds_with_every_command_one_to_two_and_a_half_samples
     assert plant.lags is not None and (plant.lags.first, plant.lags.last) == (1, 2)
     verdict = verify_gains(plant, result.gains, result.certificate, result.gamma_e, result.gamma_z)
     assert verdict.stable and verdict.certificate_valid and verdict.bound_holds, verdict
-    loop = _Loop(plant, result.gains)
-    sim = Simulation(plant=plant.physical, sink=loop, steps=70, fault=parse_fault_spec("bias:2@20"),
-                     delay=parse_delay_spec("uniform:1:2.4", seed=3))
-    loop.sim = sim
-    while not sim.done:
-        t = sim.next_time()
-        loop.now = t  # an answer arrives when its sample is sent: the drawn delay is the whole delay
-        sim.run_until(t)
+    # the monitor's estimator answering each sample when it is sent: the drawn delay is the whole delay
+    loop = ClosedLoop(Estimator(plant, result.gains))
+    loop.fly(Simulation(plant=plant.physical, sink=loop, steps=70, fault=parse_fault_spec("bias:2@20"),
+                        delay=parse_delay_spec("uniform:1:2.4", seed=3)))
     taus = [p["tau"] for p in loop.truth.values() if p["tau"] is not None]
     assert len(taus) > 50 and min(taus) >= 1.0 and max(taus) > 2.0  # every command acted one to 2.4 samples late
     assert sum(p["in_force"] < p["k"] - 1 for p in loop.truth.values()) > 10  # often u(k-2) or older was in force
