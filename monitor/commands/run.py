@@ -60,10 +60,14 @@ def add_alarm_arguments(group) -> None:
     group.add_argument("--alarm-threshold", type=_threshold_value, default=1.0, metavar="X",
                        help="raise when max |f_hat| >= X (plant units) for --alarm-samples samples in a row; "
                             f"'auto': {AUTO_MARGIN} x the proven bound on |f_hat| with no fault and |d| <= "
-                            "--disturbance-bound (fault-monitor threshold), so wind alone cannot raise it "
-                            "(default: 1.0)")
+                            "--disturbance-bound (fault-monitor threshold), so wind alone cannot raise it; or, "
+                            "with --turbulence, the level crossed once per flight hour in that turbulence "
+                            "(fault-monitor detectability) (default: 1.0)")
     group.add_argument("--disturbance-bound", type=float, default=None, metavar="D",
                        help="with --alarm-threshold auto: the largest |d(k)| the vehicle meets (plant units)")
+    group.add_argument("--turbulence", choices=("light", "moderate", "severe"), default=None, metavar="LEVEL",
+                       help="with --alarm-threshold auto, instead of --disturbance-bound: the turbulence flown "
+                            "(light, moderate, severe at 3000 ft; needs the plant's [disturbance] table)")
     group.add_argument("--alarm-clear", type=float, default=None, metavar="Y",
                        help="clear when max |f_hat| < Y for --alarm-samples samples in a row "
                             "(default: half the threshold)")
@@ -79,9 +83,25 @@ def alarm_from_args(args: argparse.Namespace, fleet=None):
     from monitor.service.alarm import AlarmConfig
 
     threshold = args.alarm_threshold
-    if threshold == "auto":
+    turbulence = getattr(args, "turbulence", None)
+    if threshold == "auto" and turbulence is not None:
+        if args.disturbance_bound is not None:
+            raise UserError("--alarm-threshold auto takes one of --disturbance-bound D and --turbulence LEVEL, not both")
+        from monitor.checks.detectability import turbulence_threshold
+
+        models = fleet.models() if fleet else []
+        if not models:
+            raise UserError("--alarm-threshold auto needs the vehicles' plant and gains")
+        threshold = max(turbulence_threshold(m.plant, m.gains.gains, turbulence,
+                                             report_time_constant=getattr(m.gains, "fault_time_constant", None))
+                        for m in models)
+        logging.getLogger("monitor.alarm").info(
+            "alarm threshold auto: %.4g, crossed about once per flight hour in %s turbulence (fault-monitor "
+            "detectability)", threshold, turbulence)
+    elif threshold == "auto":
         if args.disturbance_bound is None:
-            raise UserError("--alarm-threshold auto needs --disturbance-bound D (the largest |d| to tolerate)")
+            raise UserError("--alarm-threshold auto needs --disturbance-bound D (the largest |d| to tolerate) "
+                            "or --turbulence LEVEL")
         from monitor.checks.threshold import fault_threshold
 
         bounds = [fault_threshold(m.plant, m.gains.gains, args.disturbance_bound) for m in (fleet.models() if fleet else [])]
@@ -95,8 +115,8 @@ def alarm_from_args(args: argparse.Namespace, fleet=None):
             "alarm threshold auto: %.4g = %.2f x the proven bound %.4g on |f_hat| with no fault and |d| <= %g "
             "(the l1 norm at the worst constant delay is %.4g)", threshold, AUTO_MARGIN, worst.threshold,
             args.disturbance_bound, worst.frozen_l1 * args.disturbance_bound)
-    elif args.disturbance_bound is not None:
-        raise UserError("--disturbance-bound applies to --alarm-threshold auto only")
+    elif args.disturbance_bound is not None or turbulence is not None:
+        raise UserError(f"--{'turbulence' if turbulence else 'disturbance-bound'} applies to --alarm-threshold auto only")
     clear = args.alarm_clear if args.alarm_clear is not None else 0.5 * threshold
     try:
         return AlarmConfig(threshold, clear, args.alarm_samples)
