@@ -161,3 +161,18 @@ def test_a_certified_loop_holds_with_every_command_one_to_two_and_a_half_samples
     # u(k-1), as within one sample, stays 4 % off: the report is whichever older command is in force)
     assert max(errors) <= 0.02 * 2.0, max(errors)
     assert max(abs(loop.f_hat[k]) for k in range(0, 20)) < 0.05  # nothing before the onset
+
+
+def test_margin_bisects_past_one_sample_and_its_design_verifies_there():
+    """A stable 1-state plant takes any delay: the margin reaches the search's top, 1.9 samples, with a design
+    whose certificate verify accepts on the lagged plant."""
+    from monitor.checks.margin import delay_margin
+    from monitor.checks.verify import verify_gains
+
+    plant = plant_from_table({"form": "continuous", "h": 1.0, "tau_min": 0.0, "tau_max": 0.3, "A_c": [[-1.0]],
+                              "B_c": [[1.0]], "D_cf": [[1.0]], "D_cd": [[1.0]], "C": [[1.0]]}, "tiny")
+    margin = delay_margin(plant, tolerance=0.2, curve_points=2, up_to=1.9)
+    assert margin.tau_max == pytest.approx(1.9) and margin.plant.lags is not None
+    result = margin.design
+    verdict = verify_gains(margin.plant, result.gains, result.certificate, result.gamma_e, result.gamma_z)
+    assert verdict.stable and verdict.certificate_valid, verdict
