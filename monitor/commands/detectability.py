@@ -152,8 +152,8 @@ def _print(plant, r, mc, args) -> None:
     print(f"monte carlo    {mc.flights} JSBSim {mc.aircraft} flights in {mc.turbulence} turbulence, "
           f"{mc.hours:.2f} h before onset ({mc.seconds:.0f} s)")
     if mc.disturbance:
-        print(f"  d measured   std {mc.disturbance['sigma']:.4g} {u}, time constant "
-              f"{mc.disturbance['time_constant']:.3g} s  (predicted {r.sigma_d:.4g}, {r.time_constant:.3g})")
+        print(f"  d measured   std {mc.disturbance['sigma']:.4g} {u} (table {r.sigma_d:.4g}), lag-one time constant "
+              f"{mc.disturbance['time_constant']:.3g} s as identify fits it (table {r.time_constant:.3g} s)")
     print(f"  f_hat std    {mc.fhat_std:.4g} {u} observed, {r.fhat_std:.4g} predicted: ratio "
           f"{_fmt(_ratio(mc.fhat_std, r.fhat_std))}")
     for row in mc.crossings:
