@@ -426,3 +426,29 @@ def test_plant_file_identification_table_is_information_only() -> None:
     assert np.array_equal(info.A, plain.A)
     with pytest.raises(Exception, match="'identification' must be a table"):
         parse_plant(text + "\nidentification = 3\n[actuator]\nlimit = 30.0\n")
+
+
+def test_the_gust_is_read_from_the_one_step_residual_along_the_gust_direction() -> None:
+    """A known 2-state model driven by a Gauss-Markov gust through its alpha column: sigma and time constant back."""
+    from scipy.linalg import expm
+
+    from monitor.model.identification import _gust_from_residual
+
+    h, T, sigma = 0.05, 0.4, 0.7
+    A_c = np.array([[-2.0, 1.0], [-20.0, -4.0]])
+    A_d = expm(A_c * h)
+    B_d = np.array([[0.01], [-1.2]])
+    Dd = (A_d - np.eye(2))[:, [0]]
+    rng = np.random.default_rng(5)
+    a, n = np.exp(-h / T), 40_000
+    d = np.zeros(n)
+    for k in range(1, n):
+        d[k] = a * d[k - 1] + sigma * np.sqrt(1 - a * a) * rng.normal()
+    u = np.sign(rng.normal(size=(n, 1)))
+    x = np.zeros((n, 2))
+    for k in range(n - 1):
+        x[k + 1] = A_d @ x[k] + B_d @ u[k] + Dd[:, 0] * d[k]
+    gust = _gust_from_residual(np.arange(n), x, u, A_d, B_d, ("alpha", "q"), h)
+    assert gust is not None and abs(gust["sigma"] - sigma) < 0.05 * sigma, gust
+    expected = h * (0.5 + a / (1 - a))  # the integral time scale of the sampled process (~T for h << T)
+    assert abs(gust["time_constant"] - expected) < 0.2 * expected, gust

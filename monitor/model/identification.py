@@ -537,8 +537,11 @@ def _gust_from_residual(k: np.ndarray, x: np.ndarray, u: np.ndarray, A_d: np.nda
     What the model does not explain from one sample to the next, ``r(k) = x(k+1) - A x(k) - B u(k)``, is projected
     on the plant's gust direction ``Dd`` (the discretised ``D_cd``, the alpha column of ``A_c``: a vertical gust seen
     as an angle of attack) by least squares, and the sequence fitted with a first-order Gauss-Markov process: its
-    standard deviation, and the time constant from its lag-one correlation ``a = e^{-h / T}``. In calm air it
-    measures the model's own error (small); in turbulence, the air. None without alpha or with too few pairs.
+    standard deviation, and its integral time scale ``h (1/2 + sum rho(j))`` over the lags before the
+    autocorrelation ``rho`` first crosses zero, as the time constant. Why not the lag-one fit ``rho(1) = e^{-h/T}``:
+    it sees only the fast part; on a c172p in light turbulence it gave 0.15 s where the integral scale is 0.43 s,
+    and a low-passed estimate then came out 1.5x the prediction made from it. In calm air it measures the model's
+    own error (small); in turbulence, the air. None without alpha or with too few pairs.
     """
     if "alpha" not in names:
         return None
@@ -550,10 +553,21 @@ def _gust_from_residual(k: np.ndarray, x: np.ndarray, u: np.ndarray, A_d: np.nda
     d = np.linalg.lstsq(Dd, residual.T, rcond=None)[0][0]
     d = d - d.mean()
     sigma = float(np.std(d))
-    consecutive = np.flatnonzero(np.diff(pairs) == 1)
-    a = float(np.corrcoef(d[consecutive], d[consecutive + 1])[0, 1]) if len(consecutive) > 10 and sigma > 0 else 0.0
-    time_constant = -h / math.log(a) if 0.0 < a < 1.0 else h  # white (or anti-correlated) at this sampling: one sample
-    return {"sigma": sigma, "time_constant": float(time_constant), "samples": int(len(pairs))}
+    return {"sigma": sigma, "time_constant": _integral_time_scale(d, h) if sigma > 0 else h, "samples": int(len(pairs))}
+
+
+def _integral_time_scale(d: np.ndarray, h: float, max_lag_s: float = 20.0) -> float:
+    """``h (1/2 + sum_{j >= 1} rho(j))`` up to the first lag where the autocorrelation ``rho`` is no longer positive
+    (at least half a sample: a white sequence)."""
+    d = d - d.mean()
+    energy = float(d @ d)
+    total = 0.5
+    for lag in range(1, min(len(d) // 2, int(max_lag_s / h))):
+        rho = float(d[:-lag] @ d[lag:]) / energy
+        if rho <= 0.0:
+            break
+        total += rho
+    return float(total * h)
 
 
 # --- the plant file ---------------------------------------------------------------------------------------------
