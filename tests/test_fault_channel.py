@@ -55,3 +55,5 @@ def test_the_filter_is_on_by_default_only_for_a_plant_flying_in_turbulence():
     assert default_fault_time_constant(parse_plant(base + '[disturbance]\nsigma = 0.2\ntime_constant = 0.1\n')) is None
     light = parse_plant(base + '[disturbance]\nsigma = 0.4\ntime_constant = 0.4\nturbulence = "light"\n')
     assert default_fault_time_constant(light) == 1.0
+    assert default_fault_time_constant(light, "none") is None  # design --turbulence none: calm air after all
+    assert default_fault_time_constant(load_plant("paper-continuous"), "moderate") == 1.0

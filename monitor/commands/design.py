@@ -36,8 +36,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--fault-time-constant", type=float, default=None, metavar="S",
                         help="report f_hat low-passed with this time constant in seconds, for the alarm and every "
                              "user of the estimate (the loop keeps the raw estimate); 0: report it raw (default: "
-                             "1 s for a plant whose [disturbance] table names a turbulence level, e.g. one written by identify "
-                             "--turbulence light, else 0)")
+                             "1 s in turbulence, see --turbulence; 0 in calm air)")
+    parser.add_argument("--turbulence", choices=("none", "light", "moderate", "severe"), default=None,
+                        help="the air the loop will fly in: in turbulence the reported f_hat is low-passed over 1 s "
+                             "(no false alarms from gusts, detection about 1 s later); default: the level the plant's "
+                             "[disturbance] table names, else none")
     parser.add_argument("--max-losses", type=int, default=0, metavar="N",
                         help="also certify stability through up to N consecutive lost samples or lost/late commands "
                              "(any mix, any delays in the interval); the design fails if no certificate exists "
@@ -75,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
         if not (math.isfinite(args.fault_time_constant) and args.fault_time_constant >= 0):
             raise UserError(f"--fault-time-constant must be >= 0 seconds, got {args.fault_time_constant}")
         options["fault_time_constant"] = args.fault_time_constant
+    if args.turbulence is not None:
+        options["turbulence"] = args.turbulence
     plant = load_plant(args.plant)
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     say(f"designing ({args.method}) for plant '{plant.name}' ({plant.source}), tau in [{plant.tau_min}, {plant.tau_max}] s ...")

@@ -27,12 +27,12 @@ FALLBACK_BUDGET_S = 8.0
 FAULT_FILTER_S = 1.0
 
 
-def default_fault_time_constant(plant: Plant) -> float | None:
-    """The reported estimate's low-pass by default: ``FAULT_FILTER_S`` for a plant whose ``[disturbance]`` names a
-    turbulence level (``identify --turbulence``), none otherwise (calm air, the paper's presets): in calm air the
-    filter would only delay the detection."""
-    air = plant.disturbance
-    return FAULT_FILTER_S if air is not None and air.turbulence not in (None, "none") else None
+def default_fault_time_constant(plant: Plant, turbulence: str | None = None) -> float | None:
+    """The reported estimate's low-pass by default: ``FAULT_FILTER_S`` in turbulence, none in calm air (there the
+    filter would only delay the detection). The air is ``turbulence`` when given (``design --turbulence``), else
+    the level the plant's ``[disturbance]`` table names (``identify --turbulence``); none named: calm."""
+    level = turbulence or (plant.disturbance.turbulence if plant.disturbance is not None else None)
+    return FAULT_FILTER_S if level not in (None, "none") else None
 
 
 def reported_error_bound(gamma_e: float, h: float, fault_time_constant: float | None) -> float:
@@ -51,7 +51,8 @@ def reported_error_bound(gamma_e: float, h: float, fault_time_constant: float | 
 def run_design(method: str, plant: Plant, **options) -> DesignResult:
     """Dispatch to the method's module; imported lazily because cvxpy's import costs about a second."""
     objective = options.pop("objective", None)
-    filtering = options.pop("fault_time_constant", None)  # None: the plant's default; 0: report the raw estimate
+    filtering = options.pop("fault_time_constant", None)  # None: the default for the air; 0: the raw estimate
+    turbulence = options.pop("turbulence", None)  # the air the design is for (None: the plant's [disturbance] says)
     max_losses = int(options.pop("max_losses", 0) or 0)
     if max_losses:
         from monitor.model.loss_model import check_max_losses, refuse_past_one_sample
@@ -88,7 +89,8 @@ def run_design(method: str, plant: Plant, **options) -> DesignResult:
         from monitor.design.loss_certificate import certify_losses
 
         result = certify_losses(result, plant, max_losses)
-    result.fault_time_constant = default_fault_time_constant(plant) if filtering is None else (filtering or None)
+    result.fault_time_constant = (default_fault_time_constant(plant, turbulence) if filtering is None
+                                  else (filtering or None))
     if result.fault_time_constant:
         result.notes.append(
             f"the reported f_hat is the estimate low-passed with a {result.fault_time_constant:g}-s time constant (the "
