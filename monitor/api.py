@@ -62,10 +62,14 @@ def plant_from_arrays(*, h: float, tau_max: float, tau_min: float = 0.0, C: Arra
     ...                       D_cf=[[0.0], [1.0]], D_cd=[[0.5], [1.0]], C=[[1.0, 0.0]])
     >>> p.form, p.n, p.m, round(p.tau_bar, 2)
     ('continuous', 2, 1, 0.15)
-    >>> plant_from_arrays(h=1.0, tau_max=1.5, A_c=[[-1.0]], B_c=[[1.0]], D_cf=[[1.0]], D_cd=[[1.0]], C=[[1.0]])
+    >>> slow = plant_from_arrays(h=1.0, tau_max=1.5, A_c=[[-1.0]], B_c=[[1.0]], D_cf=[[1.0]], D_cd=[[1.0]], C=[[1.0]])
+    >>> slow.n, slow.physical.n  # a delay past h: the command still in flight, u(k-2), joins the state
+    (2, 1)
+    >>> plant_from_arrays(h=1.0, tau_min=0.5, tau_max=0.3, A_c=[[-1.0]], B_c=[[1.0]], D_cf=[[1.0]], D_cd=[[1.0]],
+    ...                   C=[[1.0]])
     Traceback (most recent call last):
     ...
-    monitor.errors.UserError: notebook: keys 'tau_min'/'tau_max' must satisfy 0 <= tau_min <= tau_max < h (got 0.0, 1.5, h = 1.0)
+    monitor.errors.UserError: notebook: keys 'tau_min'/'tau_max' must satisfy 0 <= tau_min <= tau_max (got 0.5, 0.3)
     """
     table: dict[str, Any] = {"name": name, "h": float(h), "tau_min": float(tau_min), "tau_max": float(tau_max),
                              "C": _rows(C)}
