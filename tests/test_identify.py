@@ -452,3 +452,22 @@ def test_the_gust_is_read_from_the_one_step_residual_along_the_gust_direction() 
     assert gust is not None and abs(gust["sigma"] - sigma) < 0.05 * sigma, gust
     expected = h * (0.5 + a / (1 - a))  # the integral time scale of the sampled process (~T for h << T)
     assert abs(gust["time_constant"] - expected) < 0.2 * expected, gust
+
+
+def test_air_only_keeps_the_model_and_measures_the_gust_of_another_log(c172p_flight, tmp_path: Path) -> None:
+    """On the very log it was identified from, --air-only measures the same gust identify wrote (same model, same
+    operating point); the model, the map and every other table stay the plant's; the level is written."""
+    plant_path, kept_path = tmp_path / "p.toml", tmp_path / "kept.toml"
+    code, _out, stderr = _identify(str(c172p_flight["log"]), "--out", str(plant_path))
+    assert code == 0, stderr
+    code, out, stderr = _identify(str(c172p_flight["log"]), "--air-only", str(plant_path), "--turbulence", "light",
+                                  "--out", str(kept_path))
+    assert code == 0 and "measured the air" in out, stderr
+    plant, kept = load_plant(plant_path), load_plant(kept_path)
+    assert np.array_equal(plant.A, kept.A) and plant.signals == kept.signals and plant.digest != kept.digest
+    assert kept.disturbance.turbulence == "light"
+    assert kept.disturbance.sigma == pytest.approx(plant.disturbance.sigma, rel=1e-3)
+    assert kept.disturbance.time_constant == pytest.approx(plant.disturbance.time_constant, rel=1e-3)
+    code, _o, stderr = _identify(str(c172p_flight["log"]), "--air-only", str(tmp_path / "none.toml"), "--out",
+                                 str(tmp_path / "x.toml"))
+    assert code == 2 and len(stderr.strip().splitlines()) == 1, stderr

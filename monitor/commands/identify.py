@@ -12,6 +12,7 @@ field and is a latest value of the signal map (sample and hold, ``monitor/link/a
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -80,6 +81,10 @@ def register(subparsers) -> None:
     p.add_argument("--turbulence", metavar="LEVEL", help="the turbulence the flight met (none, light, moderate, "
                    "severe), written beside the gust measured from the log ([disturbance]); information for "
                    "detectability, which scales the gust to other levels")
+    p.add_argument("--air-only", metavar="PLANT.toml", help="keep PLANT's model and measure only the air this log "
+                   "flew in: PLANT is written to --out with its [disturbance] table measured from this log (with "
+                   "--turbulence LEVEL, the level flown). Identify the dynamics in calm air, then the gust from a "
+                   "flight in turbulence: a turbulent flight spoils the dynamics' fit")
     p.add_argument("--actuator-limit", type=float, metavar="DEG", default=DEFAULT_ACTUATOR_LIMIT,
                    help="elevator limit about trim written to [actuator] (default: 25.0; a log shows the "
                         "deflections flown, not the aircraft's stops)")
@@ -171,6 +176,7 @@ class IdentifyRequest:
     tau_max: float | None = None
     tau_min: float = 0.0
     turbulence: str | None = None
+    air_only: str | None = None  # a plant file whose model is kept: only its [disturbance] is measured from the log
     actuator_limit: float = DEFAULT_ACTUATOR_LIMIT
     signals: str | None = None
     sysid: int | None = None
@@ -286,6 +292,16 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
     from monitor.model.plant import parse_plant
 
     states = MODELS[req.model]
+    kept = None
+    if req.air_only is not None:  # the plant's own map reads the log, its model explains it
+        from monitor.model.plant import load_plant
+
+        kept = load_plant(req.air_only).physical
+        if kept.continuous is None or not kept.signals:
+            raise UserError(f"--air-only {req.air_only}: needs a continuous plant with a [signals] table (one "
+                            "written by identify)")
+        states = tuple(kept.signals.get("outputs", ()))
+        req = dataclasses.replace(req, signals=req.air_only, h=kept.h)
     if dlog is not None and req.signals is None:
         hints = "; ".join(dlog.inventory.providers(("angle of attack", "body rates (gyro)", "attitude", "airspeed",
                                                      "actuator output")))
@@ -316,6 +332,8 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
     U = np.array([[v.get(actuator, math.nan)] for _k, v in rows], dtype=float).reshape(len(rows), 1)
     units = tuple(str(written["measured"][s].get("unit", "")) if isinstance(written["measured"][s], dict) else ""
                   for s in states)
+    if kept is not None:
+        return _measure_air(req, kept, k, X, U, states, sysid, units, flight, started)
     if flight.records >= _LONG_LOG_RECORDS:
         say(f"{len(rows)} samples of sysid {sysid} read in {time.perf_counter() - started:.1f} s; fitting and "
             "validating")
@@ -348,13 +366,74 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
     return IdentifiedLog(req, result, sysid, tau_max, units, flight, seconds)
 
 
+def _measure_air(req: IdentifyRequest, kept, k, X, U, states, sysid: int, units, flight, started: float):
+    """``--air-only``: the kept plant's file, its ``[disturbance]`` measured from this log (``_gust_from_residual``)."""
+    import numpy as np
+
+    from monitor.errors import UserError
+    from monitor.model.identification import _gust_from_residual, disturbance_table
+    from monitor.model.plant import parse_plant
+
+    op = kept.signals.get("operating_point", {}) if isinstance(kept.signals, dict) else {}
+    actuator = tuple(kept.signals.get("actuator", ("elevator",)))
+    x = X - np.array([float(op.get(s, 0.0)) for s in states])
+    u = U - np.array([float(op.get(a, 0.0)) for a in actuator])
+    gust = _gust_from_residual(k, x, u, kept.A, kept.B0 + kept.B1, states, kept.h)
+    if gust is None:
+        raise UserError(f"{req.log}: too few consecutive samples (or no alpha) to measure the gust")
+    text = Path(req.air_only).read_text("utf-8")
+    kept_lines, skipping = [], False
+    for line in text.splitlines():  # every line but the old [disturbance] table's
+        if line.strip().startswith("["):
+            skipping = line.strip() == "[disturbance]"
+        if not skipping:
+            kept_lines.append(line)
+    table = disturbance_table(gust, req.turbulence, source=f"{Path(req.log).name}, sysid {sysid}, with this model")
+    text = "\n".join(kept_lines).rstrip() + "\n\n" + "\n".join(table) + "\n"
+    out = Path(req.out)
+    parse_plant(text, source=str(out))
+    try:
+        write_text_atomically(out, text)
+    except OSError as exc:
+        raise UserError(f"{out}: cannot write the plant file: {exc.strerror or exc}") from None
+    say_gust = f"gust sigma {gust['sigma']:.4g} deg, time constant {gust['time_constant']:.3g} s"
+    return AirMeasured(req, sysid, units, flight, time.perf_counter() - started, gust, say_gust)
+
+
+@dataclass
+class AirMeasured:
+    """``--air-only``'s result: the gust measured, and the plant file written with it."""
+
+    request: IdentifyRequest
+    sysid: int
+    units: tuple[str, ...]
+    flight: FlightLog
+    seconds: float
+    gust: dict[str, float]
+    summary: str
+
+    @property
+    def plant_path(self) -> Path:
+        return Path(self.request.out)
+
+    def report(self) -> dict[str, Any]:
+        return {"source_log": str(self.request.log), "sysid": self.sysid, "out": str(self.request.out),
+                "kept_model": str(self.request.air_only), "disturbance": self.gust,
+                "turbulence": self.request.turbulence}
+
+
 def run(args: argparse.Namespace) -> int:
     req = IdentifyRequest(log=args.tlog, out=args.out, model=args.model, h=args.h, tau_max=args.tau_max,
-                          tau_min=args.tau_min, turbulence=args.turbulence,
+                          tau_min=args.tau_min, turbulence=args.turbulence, air_only=args.air_only,
                           actuator_limit=args.actuator_limit, signals=args.signals, sysid=args.sysid, name=args.name)
     done = identify_log(req, say=lambda text: print(f"identify: {text}", file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps(done.report()))
+        return 0
+    if isinstance(done, AirMeasured):
+        print(f"measured the air of {req.log} (sysid {done.sysid}) with the model of {req.air_only}: {done.summary}")
+        print(f"wrote {req.out}: {req.air_only} with that [disturbance] table"
+              + (f" (turbulence {req.turbulence})" if req.turbulence else ""))
         return 0
     print(_format(done.result, req.log, done.sysid, req.model, done.units))
     print(f"wrote {req.out}: tau in [{req.tau_min:g}, {done.tau_max:g}] s, actuator limit {req.actuator_limit:g} deg "

@@ -599,6 +599,19 @@ def _round(x: float, digits: int = 6) -> float:
     return float(f"{x:.{digits}g}") if math.isfinite(x) else x
 
 
+def disturbance_table(gust: dict[str, float], turbulence: str | None, source: str | None = None) -> list[str]:
+    """The ``[disturbance]`` table's lines for a gust measured by ``_gust_from_residual``."""
+    lines = ["[disturbance]", "# the gust input d (through D_cd) the flight met, as a first-order Gauss-Markov process: "
+             "what", "# the model's one-step residual shows along D_cd (calm air: the model's own error)",
+             f"sigma = {_value(_round(gust['sigma']))}   # deg",
+             f"time_constant = {_value(_round(gust['time_constant']))}   # s (integral time scale)"]
+    if turbulence is not None:
+        lines.append(f"turbulence = {_value(turbulence)}   # the level flown (sim-vehicle --turbulence)")
+    if source is not None:
+        lines.append(f"source = {_value(source)}")
+    return lines
+
+
 def plant_toml(result: Identification, *, name: str, description: str, tau_max: float, actuator_limit: float,
                tau_min: float = 0.0, turbulence: str | None = None,
                actuator_limit_source: str, signals: dict[str, Any], source_log: str, model: str,
@@ -622,12 +635,7 @@ def plant_toml(result: Identification, *, name: str, description: str, tau_max: 
     lines += [f"{key} = {_value(value)}" for key, value in top]
     lines += ["", "[actuator]", f"limit = {_value(float(actuator_limit))}   # deg, {actuator_limit_source}"]
     if result.disturbance is not None and result.disturbance["sigma"] > 0:
-        lines += ["", "[disturbance]", "# the gust input d (through D_cd) the flight met, as a first-order Gauss-Markov "
-                  "process: what", "# the model's one-step residual shows along D_cd (calm air: the model's own error)",
-                  f"sigma = {_value(_round(result.disturbance['sigma']))}   # deg",
-                  f"time_constant = {_value(_round(result.disturbance['time_constant']))}   # s"]
-        if turbulence is not None:
-            lines.append(f"turbulence = {_value(turbulence)}   # the level flown (sim-vehicle --turbulence)")
+        lines += ["", *disturbance_table(result.disturbance, turbulence)]
     lines += ["", "[signals]"]
     plain = {key: v for key, v in signals.items() if not isinstance(v, dict)}
     for key, value in plain.items():
