@@ -20,6 +20,13 @@ for ``pytest --markers`` and for an xdist that reads them again.
 from __future__ import annotations
 
 import os
+
+# One BLAS thread per test process (set before numpy loads; inherited by the daemons and commands the tests
+# start). The matrices here are at most ~30x30, so threads only add overhead, and two xdist workers on two cores
+# each running two threads oversubscribe them: the margin search took 17.9 s of CPU threaded, 9.6 s in one thread.
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
 from pathlib import Path
 
 import pytest
