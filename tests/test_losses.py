@@ -114,12 +114,13 @@ def test_verify_losses_finds_the_divergent_pattern_of_the_hinf_design():
 
 
 def test_verify_losses_never_calls_a_divergent_loop_stable():
-    """Random gains: whenever verify claims stability under <= 2 losses, long adversarial simulations agree."""
+    """Random gains: whenever verify claims stability under <= 2 losses, long adversarial simulations agree.
+    Seven draws of this seed: four that verify proves stable, three it calls unstable (they diverge)."""
     plant = load_plant("paper-continuous")
     _, fast = design("fast")
     rng = np.random.default_rng(11)
     claimed = 0
-    for _ in range(9):
+    for _ in range(7):
         g = fast.gains
         gains = Gains(L=g.L * rng.uniform(0.5, 1.6), M=g.M * rng.uniform(0.5, 1.6), K1=g.K1 + rng.normal(0, 0.3, (1, 1)),
                       K2=g.K2 * rng.uniform(0.3, 1.1), K3=g.K3)
@@ -132,7 +133,7 @@ def test_verify_losses_never_calls_a_divergent_loop_stable():
             events = [DELIVERED] * 6 + pattern * 50
             for tau in (plant.tau_min, plant.tau_max):
                 assert _growth(plant, gains, events, np.full(len(events), tau)) < 1.0
-    assert claimed >= 2  # the check above ran on some claims
+    assert claimed >= 3  # the check above ran on some claims (four with this seed)
 
 
 def fm(*args: str) -> subprocess.CompletedProcess:
