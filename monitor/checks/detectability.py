@@ -334,7 +334,7 @@ def detectability(plant: Plant, gains: Gains, *, disturbance_bound: float | None
                   report_time_constant=report_time_constant)
     if disturbance_bound is not None:
         from monitor.checks.threshold import fault_threshold
-        from monitor.commands.run import AUTO_MARGIN
+        from monitor.checks import AUTO_MARGIN
 
         bound = fault_threshold(plant, gains, disturbance_bound)
         c0 = bound.threshold

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from monitor.checks import AUTO_MARGIN  # a constant of the light package module (no numpy at --help)
+
 __all__ = ["register", "add_model_arguments", "load_models", "add_alarm_arguments", "alarm_from_args"]
 
 
@@ -41,9 +43,6 @@ def load_models(args: argparse.Namespace, layouts=None):
     default = (load_model(args.plant, args.gains, args.force, args.signals, layouts or MAVLINK) if args.plant
                else None)
     return load_fleet(fleet_file, default, args.force) if fleet_file else Fleet(default)
-
-
-AUTO_MARGIN = 1.25  # --alarm-threshold auto: raise at 1.25 x the proven no-fault bound on |f_hat|
 
 
 def _threshold_value(text: str) -> float | str:

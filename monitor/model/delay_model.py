@@ -22,7 +22,7 @@ from functools import lru_cache
 import numpy as np
 
 from monitor.model.discretize import F_of_tau, b0_b1, delta_exact, delta_lemma1, integral_expm, reconstruct_continuous
-from monitor.model.long_delay import lag_intervals, lag_point, lag_realization
+from monitor.model.long_delay import curve_of, lag_intervals, lag_point, lag_realization
 from monitor.model.plant import ContinuousModel, Plant
 
 __all__ = ["b0_of_tau", "tau_grid", "b0_polytope", "curve_model", "input_sum", "delta_summary", "lag_curve",
@@ -50,14 +50,9 @@ def _E(plant: Plant) -> np.ndarray:
 
 @lru_cache(maxsize=32)
 def lag_curve(base: Plant):
-    """``a -> G(a) = int_a^h e^{A_c (h - s)} ds B_c`` for ``a`` in ``[0, h]``: the exact (or reconstructed) curve."""
+    """``a -> G(a)`` for ``a`` in ``[0, h]`` (``monitor.model.long_delay.curve_of``) of the exact or reconstructed model."""
     model = curve_model(base)
-    h = base.h
-
-    def curve(a: float) -> np.ndarray:
-        return integral_expm(model.A_c, h - float(a))[1] @ model.B_c
-
-    return curve
+    return curve_of(model.A_c, model.B_c, base.h)
 
 
 def point_size(plant: Plant) -> int:

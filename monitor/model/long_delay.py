@@ -33,11 +33,22 @@ import math
 
 import numpy as np
 
-__all__ = ["lag_span", "lag_intervals", "lag_point", "lag_realization", "lagged_matrices", "MAX_LAG_PARTS"]
+__all__ = ["lag_span", "lag_intervals", "lag_point", "lag_realization", "lagged_matrices", "curve_of",
+           "MAX_LAG_PARTS"]
 
 # each whole-sample part the interval spans multiplies the certificate's vertices by its own polytope's count
 # (up to 2n): 3 parts on a 4-state aircraft is 512 vertices, minutes of LMI solving; 3 is the practical limit
 MAX_LAG_PARTS = 3
+
+
+def curve_of(A_c: np.ndarray, B_c: np.ndarray, h: float):
+    """``a -> G(a) = int_a^h e^{A_c (h - s)} ds B_c`` for ``a`` in ``[0, h]``: the ``B0`` of a delay ``a``."""
+    from monitor.model.discretize import integral_expm
+
+    def curve(a: float) -> np.ndarray:
+        return integral_expm(A_c, h - float(a))[1] @ B_c
+
+    return curve
 
 
 def lag_span(h: float, tau_min: float, tau_max: float) -> tuple[int, int]:

@@ -258,8 +258,8 @@ def _lagged_plant(raw: dict[str, Any], source: str, h: float, tau_min: float, ta
     first-order picture of one interval only). Refused with one line when the interval spans more whole
     samples than a certificate can enumerate in reasonable time.
     """
-    from monitor.model.delay_model import lag_curve
-    from monitor.model.long_delay import MAX_LAG_PARTS, lag_point, lag_realization, lag_span, lagged_matrices
+    from monitor.model.discretize import reconstruct_continuous
+    from monitor.model.long_delay import MAX_LAG_PARTS, curve_of, lag_point, lag_realization, lag_span, lagged_matrices
 
     first, last = lag_span(h, tau_min, tau_max)
     if last - first + 1 > MAX_LAG_PARTS:
@@ -268,7 +268,8 @@ def _lagged_plant(raw: dict[str, Any], source: str, h: float, tau_min: float, ta
             f"of h = {h:g} s; at most {MAX_LAG_PARTS} can be certified (each multiplies the certificate's vertices): "
             f"narrow the interval (tau_max - tau_min < {MAX_LAG_PARTS - 1} h always fits)")
     base = plant_from_table({**raw, "tau_min": 0.0, "tau_max": 0.0}, source)
-    curve = lag_curve(base)
+    model = base.continuous or reconstruct_continuous(base.A, base.B0 + base.B1, base.Df, base.Dd, h)
+    curve = curve_of(model.A_c, model.B_c, h)
     nominal = lag_point(curve, h, tau_min, tau_max, 0.5 * (tau_min + tau_max))
     A, B0, B1 = lag_realization(nominal, base.A, curve(0.0), first, last)
     C, Df, Dd = lagged_matrices(base.C, base.Df, base.Dd, base.m, last)
