@@ -3,7 +3,7 @@ blocks marked ``run`` as a user types them.
 
 The marker is an HTML comment (GitHub does not show it) among the comment lines directly above the opening fence:
 
-    <!-- readme: run GROUP -->               run by GROUP's test (tests/test_readme.py; the notebook: tests/test_api.py)
+    <!-- readme: run GROUP -->               run by GROUP's test (tests/test_readme.py's RUN_GROUPS names each)
     <!-- readme: run GROUP; not run: CMD (REASON) -->   the same, except the lines that start with CMD
     <!-- readme: file NAME -->               a file the user saves as NAME: parsed, and present in every run directory
     <!-- readme: signals mavlink -->         a [signals] table, read by the project's own map reader (the MAVLink
@@ -287,7 +287,7 @@ class Session:
             looping = "while True" in block.text
             script = self.logs / f"block-{block.line}.py"
             script.write_text(self.rewrite_ports(block.text))
-            step = self._start(block, block.line, f"{sys.executable} {script}",
+            step = self._start(block, block.line, f"{shlex.quote(sys.executable)} {shlex.quote(str(script))}",
                                looping if background is None else background)
             return [step]
         skip = block.arg("skip")
