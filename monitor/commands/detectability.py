@@ -34,7 +34,7 @@ Then:    fault-monitor run ... --alarm-threshold auto --turbulence moderate"""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from monitor.checks.detectability import FALSE_ALARMS_PER_HOUR, PROBABILITY, WITHIN_S
+    from monitor.checks import FALSE_ALARMS_PER_HOUR, PROBABILITY, WITHIN_S
 
     p = sub.add_parser("detectability", help="the smallest elevator bias detected within T s at a false-alarm budget",
                        description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)

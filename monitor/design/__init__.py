@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
-from monitor.design.result import DesignResult
-from monitor.model.plant import Plant
+if TYPE_CHECKING:  # the CLI imports this module for METHODS and OBJECTIVES: no numpy, scipy or cvxpy at --help
+    from monitor.design.result import DesignResult
+    from monitor.model.plant import Plant
 
 METHODS = ("certified", "paper", "separate", "robust-separate")
 OBJECTIVES = ("fast", "hinf")
