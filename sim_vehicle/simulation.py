@@ -92,15 +92,15 @@ class SampleTruth:
     late: bool = False
     onboard: bool = False  # the vehicle's own command (autopilot, excitation) acted, not an answer from outside
     in_force: int = -1  # the sample whose command was in force at this instant (-1: none yet)
-    u_end: float | None = None  # the deflection commanded at the end of the interval
+    u_end: float | None = None  # the deflection commanded at the end of the interval (set when it ends)
     extras: dict = field(default_factory=dict)  # the model's own keys (an aircraft: surface, trim, ...)
 
-    def payload(self, sysid: int, u: float, unit: str) -> dict:
+    def payload(self, sysid: int, unit: str) -> dict:
         """The contract's truth payload plus extras (``status``, ``tau_drawn``, ``u``, ``elevator``, ...)."""
         status = "applied" if self.tau is not None else ("late" if self.late else "lost")
         return {
             "sysid": sysid, "k": self.k, "t": self.t, "x": self.x, "f": self.f, "d": self.d, "tau": self.tau,
-            "status": status, "tau_drawn": self.tau_drawn, "u": [u if self.u_end is None else self.u_end],
+            "status": status, "tau_drawn": self.tau_drawn, "u": [self.u_end],
             "in_force": self.in_force, "elevator": self.elevator,
             "effectiveness": self.effectiveness, "stuck": self.stuck, "unit": unit, **self.extras,
         }
@@ -199,9 +199,7 @@ class Simulation:
 
     def _sample(self, t: float, k: int) -> None:
         model = self.model
-        self.airframe.advance_to(t)
-        if k - 1 in self._pending:
-            self._pending[k - 1].u_end = self.airframe.target
+        self._end_interval(t, k - 1)
         self._settle_due(t)
         self.k = k
         x = model.state()
@@ -294,6 +292,12 @@ class Simulation:
         if k in self._pending:
             self._pending[k].tau = tau
 
+    def _end_interval(self, t: float, k: int) -> None:
+        """Integrate to the end of sample ``k``'s interval and note the deflection commanded then (its truth's u)."""
+        self.airframe.advance_to(t)
+        if k in self._pending:
+            self._pending[k].u_end = self.airframe.target
+
     def _settle_due(self, t: float) -> None:
         """Settle every sample whose command can no longer act (its deadline has passed by ``t``), oldest first."""
         for k in sorted(self._pending):
@@ -306,7 +310,7 @@ class Simulation:
         self._arrivals.pop(k - 2, None)
         if truth is None:
             return
-        payload = truth.payload(self.sysid, self.airframe.target, self.unit)
+        payload = truth.payload(self.sysid, self.unit)
         # a sample flown on board was answered by nobody: counting it "in time" would credit a monitor
         self.stats.samples["onboard" if truth.onboard else payload["status"]] += 1
         self.sink.publish_truth(payload)
@@ -316,9 +320,7 @@ class Simulation:
         self._push(t + HEARTBEAT_PERIOD, self._heartbeat)
 
     def _finish(self, t: float, k: int) -> None:
-        self.airframe.advance_to(t)
-        if k - 1 in self._pending:
-            self._pending[k - 1].u_end = self.airframe.target
+        self._end_interval(t, k - 1)
         for pending in sorted(self._pending):  # the run ends: what has not acted by now never will
             self._settle(pending)
         self.done = True
