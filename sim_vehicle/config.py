@@ -32,6 +32,7 @@ import numpy as np
 
 from monitor.config_file import apply_config_file  # the one reader of --config files (also fault-monitor run)
 from monitor.errors import UserError
+from monitor.wire import TURBULENCE_LEVELS
 from monitor.model.plant import Plant, load_plant
 from monitor.wire.specs import DelaySampler, FaultSchedule, parse_delay_spec, parse_fault_spec
 from sim_vehicle.excitation import Excitation, parse_excite_spec
@@ -76,7 +77,6 @@ class Settings:
 
 
 AIRCRAFT_DEFAULTS = {"airspeed": 100.0, "altitude": 3000.0, "rate": 20.0, "turbulence": "none"}
-TURBULENCE_LEVELS = ("none", "light", "moderate", "severe")
 
 
 def parse_hostport(text: str, what: str) -> tuple[str, int]:

@@ -69,6 +69,7 @@ C = [[1.0, 0.0]]
         (lambda t: t.replace("D_cd = [[0.0], [1.0]]", 'D_cd = "x"'), "D_cd"),
         (lambda t: t.replace('"continuous"', '"hybrid"'), "form"),
         (lambda t: t + "[actuator]\nlimt = 3\n", "actuator.limt"),
+        (lambda t: t + '[disturbance]\nsigma = 0.3\ntime_constant = 0.2\nturbulence = "lite"\n', "disturbance.turbulence"),
     ],
 )
 def test_malformed_plant_files_name_the_key_and_the_file(tmp_path, edit, key):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from monitor.demo.methods import METHODS
+from monitor.wire import TURBULENCE_LEVELS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -53,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--airspeed", type=float, default=100.0, metavar="KT", help="trim airspeed (default: 100)")
     a.add_argument("--altitude", type=float, default=3000.0, metavar="FT", help="trim altitude (default: 3000)")
     a.add_argument("--rate", type=float, default=20.0, metavar="HZ", help="sample rate, h = 1/HZ (default: 20)")
-    a.add_argument("--turbulence", default="none", choices=("none", "light", "moderate", "severe"),
+    a.add_argument("--turbulence", default="none", choices=TURBULENCE_LEVELS,
                    help="JSBSim's turbulence in the live runs (default: none; the identification flight is calm)")
     a.add_argument("--excite", default="prbs:1:60", metavar="SPEC",
                    help="the identification manoeuvre (default: prbs:1:60, +-1 deg for 60 s)")

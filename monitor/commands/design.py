@@ -8,6 +8,7 @@ import sys
 import warnings
 
 from monitor.design import METHODS, OBJECTIVES
+from monitor.wire import TURBULENCE_LEVELS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -37,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="report f_hat low-passed with this time constant in seconds, for the alarm and every "
                              "user of the estimate (the loop keeps the raw estimate); 0: report it raw (default: "
                              "1 s in turbulence, see --turbulence; 0 in calm air)")
-    parser.add_argument("--turbulence", choices=("none", "light", "moderate", "severe"), default=None,
+    parser.add_argument("--turbulence", choices=TURBULENCE_LEVELS, default=None,
                         help="the air the loop will fly in: in turbulence the reported f_hat is low-passed over 1 s "
                              "(no false alarms from gusts, detection about 1 s later); default: the level the plant's "
                              "[disturbance] table names, else none")

@@ -7,6 +7,8 @@ import json
 import math
 import sys
 
+from monitor.wire import TURBULENCE_LEVELS
+
 DESCRIPTION = """\
 What fault can be seen? For a plant and its gains, the smallest constant elevator bias that the alarm
 (|f_hat| >= threshold for --alarm-samples samples in a row, as `fault-monitor run` raises it) detects within
@@ -41,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--plant", required=True, metavar="P", help="preset (paper, paper-continuous) or plant TOML file")
     p.add_argument("--gains", required=True, metavar="GAINS.toml", help="gains file (from fault-monitor design)")
     air = p.add_mutually_exclusive_group(required=True)
-    air.add_argument("--turbulence", choices=("light", "moderate", "severe"), metavar="LEVEL",
+    air.add_argument("--turbulence", choices=TURBULENCE_LEVELS[1:], metavar="LEVEL",
                      help="light, moderate or severe (needs the plant's [disturbance] table)")
     air.add_argument("--disturbance-bound", type=float, metavar="D", help="the largest |d(k)|, plant units")
     p.add_argument("--false-alarms-per-hour", type=float, default=FALSE_ALARMS_PER_HOUR, metavar="N",
@@ -87,7 +89,7 @@ def _check(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from monitor.checks.detectability import FlightPlan, detectability, monte_carlo
-    from monitor.model.identification import _finite_or_none  # JSON has no infinity (an undetectable bias is inf)
+    from monitor.model.identification import finite_or_none  # JSON has no infinity (an undetectable bias is inf)
     from monitor.service.vehicles import load_model
 
     _check(args)
@@ -111,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
                                                                               mc.predicted_per_hour),
                                   "ratio_bias": _ratio(mc.smallest_bias_95, result.bias),
                                   "ratio_fhat_std": _ratio(mc.fhat_std, result.fhat_std)}
-        print(json.dumps(_finite_or_none(out), allow_nan=False))
+        print(json.dumps(finite_or_none(out), allow_nan=False))
         return 0
     _print(plant, result, mc, args)
     return 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from monitor.checks import AUTO_MARGIN  # a constant of the light package module (no numpy at --help)
+from monitor.wire import TURBULENCE_LEVELS
 
 __all__ = ["register", "add_model_arguments", "load_models", "add_alarm_arguments", "alarm_from_args"]
 
@@ -64,7 +65,7 @@ def add_alarm_arguments(group) -> None:
                             "(fault-monitor detectability) (default: 1.0)")
     group.add_argument("--disturbance-bound", type=float, default=None, metavar="D",
                        help="with --alarm-threshold auto: the largest |d(k)| the vehicle meets (plant units)")
-    group.add_argument("--turbulence", choices=("light", "moderate", "severe"), default=None, metavar="LEVEL",
+    group.add_argument("--turbulence", choices=TURBULENCE_LEVELS[1:], default=None, metavar="LEVEL",
                        help="with --alarm-threshold auto, instead of --disturbance-bound: the turbulence flown "
                             "(light, moderate, severe at 3000 ft; needs the plant's [disturbance] table)")
     group.add_argument("--alarm-clear", type=float, default=None, metavar="Y",

@@ -28,6 +28,7 @@ import numpy as np
 
 from monitor.errors import UserError
 from monitor.model.discretize import ContinuousModel, discretize
+from monitor.wire import TURBULENCE_LEVELS
 
 __all__ = ["Plant", "Lags", "Disturbance", "ContinuousModel", "Actuator", "load_plant", "parse_plant", "plant_from_table", "with_tau_max", "preset_names"]
 
@@ -58,8 +59,8 @@ class Disturbance:
 
     ``d' = -d / time_constant + white noise``, with standard deviation ``sigma`` (plant units): what a gust field
     looks like through one input at one flight condition (a Dryden vertical gust, seen as an angle of attack,
-    is close to it). ``fault-monitor identify`` measures it from a flight in turbulence; the smooth design
-    objective and ``detectability`` use it. ``turbulence`` names the level it was measured in (information).
+    is close to it). ``fault-monitor identify`` measures it; ``detectability`` scales it to other levels, and the
+    level it was measured in (``turbulence``) decides the reported estimate's default low-pass (``design``).
     """
 
     sigma: float
@@ -335,9 +336,10 @@ class _Reader:
                              f"is unknown (allowed: {', '.join(sorted(_DISTURBANCE_KEYS))})")
         sub = _Reader(table, self.source)
         level = table.get("turbulence")
+        if level is not None and level not in TURBULENCE_LEVELS:
+            raise self._fail("disturbance.turbulence", f"must be one of {', '.join(TURBULENCE_LEVELS)}, got {level!r}")
         return Disturbance(sigma=sub.scalar("sigma", positive=True),
-                           time_constant=sub.scalar("time_constant", positive=True),
-                           turbulence=None if level is None else str(level))
+                           time_constant=sub.scalar("time_constant", positive=True), turbulence=level)
 
     def actuator(self) -> Actuator:
         table = self.raw.get("actuator", {})
