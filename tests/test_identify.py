@@ -432,7 +432,7 @@ def test_the_gust_is_read_from_the_one_step_residual_along_the_gust_direction() 
     """A known 2-state model driven by a Gauss-Markov gust through its alpha column: sigma and time constant back."""
     from scipy.linalg import expm
 
-    from monitor.model.identification import _gust_from_residual
+    from monitor.model.identification import gust_from_residual
 
     h, T, sigma = 0.05, 0.4, 0.7
     A_c = np.array([[-2.0, 1.0], [-20.0, -4.0]])
@@ -448,7 +448,7 @@ def test_the_gust_is_read_from_the_one_step_residual_along_the_gust_direction() 
     x = np.zeros((n, 2))
     for k in range(n - 1):
         x[k + 1] = A_d @ x[k] + B_d @ u[k] + Dd[:, 0] * d[k]
-    gust = _gust_from_residual(np.arange(n), x, u, A_d, B_d, ("alpha", "q"), h)
+    gust = gust_from_residual(np.arange(n), x, u, A_d, B_d, ("alpha", "q"), h)
     assert gust is not None and abs(gust["sigma"] - sigma) < 0.05 * sigma, gust
     expected = h * (0.5 + a / (1 - a))  # the integral time scale of the sampled process (~T for h << T)
     assert abs(gust["time_constant"] - expected) < 0.2 * expected, gust

@@ -574,12 +574,12 @@ def monte_carlo(model, prediction: Detectability, flights: int, plan: FlightPlan
 def _flight_disturbance(plant: Plant, signals, loop: ClosedLoop, first: int, last: int) -> dict | None:
     """The gust over samples [first, last) of one flight, measured as ``fault-monitor identify`` does, from what the
     monitor measured and sent (a plant within one sample: every command acts in its own interval)."""
-    from monitor.model.identification import _gust_from_residual
+    from monitor.model.identification import gust_from_residual
 
     ks = np.arange(first, last)
     x = np.array([loop.y[k] for k in ks])
     u = np.array([loop.u[k] for k in ks])
-    return _gust_from_residual(ks, x, u, plant.A, plant.B0 + plant.B1, tuple(signals.outputs), plant.h)
+    return gust_from_residual(ks, x, u, plant.A, plant.B0 + plant.B1, tuple(signals.outputs), plant.h)
 
 
 def _smallest_bias(model, plan: FlightPlan, prediction: Detectability, seed: int, alarm, window: int) -> float:

@@ -25,6 +25,7 @@ from typing import Any
 
 from monitor.files import write_text_atomically
 from monitor.link.flight_log import FlightLog, log_spacing, read_flight
+from monitor.wire import TURBULENCE_LEVELS
 
 __all__ = ["IDENTIFY_SIGNALS_TOML", "IdentifyRequest", "IdentifiedLog", "identify_log", "register"]
 
@@ -78,8 +79,8 @@ def register(subparsers) -> None:
     p.add_argument("--tau-max", type=float, metavar="S", help="upper bound of the network delay written to the "
                    "plant (default: 0.46 h); it may reach past h (a radio or cellular link): the monitor then "
                    "carries the commands in flight in its state")
-    p.add_argument("--turbulence", metavar="LEVEL", help="the turbulence the flight met (none, light, moderate, "
-                   "severe), written beside the gust measured from the log ([disturbance]); information for "
+    p.add_argument("--turbulence", metavar="LEVEL", choices=TURBULENCE_LEVELS, help="the turbulence the flight met "
+                   f"({', '.join(TURBULENCE_LEVELS)}), written beside the gust measured from the log ([disturbance]); information for "
                    "detectability, which scales the gust to other levels")
     p.add_argument("--air-only", metavar="PLANT.toml", help="keep PLANT's model and measure only the air this log "
                    "flew in: PLANT is written to --out with its [disturbance] table measured from this log (with "
@@ -226,9 +227,8 @@ def _checked(req: IdentifyRequest) -> None:
         raise UserError(f"--h must be a positive number of seconds, got {req.h}")
     if not (math.isfinite(req.actuator_limit) and req.actuator_limit > 0):
         raise UserError(f"--actuator-limit must be a positive number of degrees, got {req.actuator_limit}")
-    levels = ("none", "light", "moderate", "severe")
-    if req.turbulence is not None and req.turbulence not in levels:
-        raise UserError(f"--turbulence must be one of {', '.join(levels)}, got {req.turbulence!r}")
+    if req.turbulence is not None and req.turbulence not in TURBULENCE_LEVELS:
+        raise UserError(f"--turbulence must be one of {', '.join(TURBULENCE_LEVELS)}, got {req.turbulence!r}")
 
 
 def _periods(req: IdentifyRequest, smap, dlog=None) -> tuple[float, int, float]:
@@ -333,7 +333,7 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
     units = tuple(str(written["measured"][s].get("unit", "")) if isinstance(written["measured"][s], dict) else ""
                   for s in states)
     if kept is not None:
-        return _measure_air(req, kept, k, X, U, states, sysid, units, flight, started)
+        return _measure_air(req, kept, k, X, U, states, sysid)
     if flight.records >= _LONG_LOG_RECORDS:
         say(f"{len(rows)} samples of sysid {sysid} read in {time.perf_counter() - started:.1f} s; fitting and "
             "validating")
@@ -366,19 +366,18 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
     return IdentifiedLog(req, result, sysid, tau_max, units, flight, seconds)
 
 
-def _measure_air(req: IdentifyRequest, kept, k, X, U, states, sysid: int, units, flight, started: float):
-    """``--air-only``: the kept plant's file, its ``[disturbance]`` measured from this log (``_gust_from_residual``)."""
+def _measure_air(req: IdentifyRequest, kept, k, X, U, states, sysid: int):
+    """``--air-only``: the kept plant's file, its ``[disturbance]`` measured from this log (``gust_from_residual``)."""
     import numpy as np
 
     from monitor.errors import UserError
-    from monitor.model.identification import _gust_from_residual, disturbance_table
+    from monitor.link.signals import parse_signals
+    from monitor.model.identification import disturbance_table, gust_from_residual
     from monitor.model.plant import parse_plant
 
-    op = kept.signals.get("operating_point", {}) if isinstance(kept.signals, dict) else {}
-    actuator = tuple(kept.signals.get("actuator", ("elevator",)))
-    x = X - np.array([float(op.get(s, 0.0)) for s in states])
-    u = U - np.array([float(op.get(a, 0.0)) for a in actuator])
-    gust = _gust_from_residual(k, x, u, kept.A, kept.B0 + kept.B1, states, kept.h)
+    smap = parse_signals(kept.signals, kept.source, len(states), kept.m)  # the kept plant's operating point
+    gust = gust_from_residual(k, X - np.array(smap.y0), U - np.array(smap.u0), kept.A, kept.B0 + kept.B1, states,
+                              kept.h)
     if gust is None:
         raise UserError(f"{req.log}: too few consecutive samples (or no alpha) to measure the gust")
     text = Path(req.air_only).read_text("utf-8")
@@ -396,8 +395,7 @@ def _measure_air(req: IdentifyRequest, kept, k, X, U, states, sysid: int, units,
         write_text_atomically(out, text)
     except OSError as exc:
         raise UserError(f"{out}: cannot write the plant file: {exc.strerror or exc}") from None
-    say_gust = f"gust sigma {gust['sigma']:.4g} deg, time constant {gust['time_constant']:.3g} s"
-    return AirMeasured(req, sysid, units, flight, time.perf_counter() - started, gust, say_gust)
+    return AirMeasured(req, sysid, gust)
 
 
 @dataclass
@@ -406,15 +404,11 @@ class AirMeasured:
 
     request: IdentifyRequest
     sysid: int
-    units: tuple[str, ...]
-    flight: FlightLog
-    seconds: float
     gust: dict[str, float]
-    summary: str
 
     @property
-    def plant_path(self) -> Path:
-        return Path(self.request.out)
+    def summary(self) -> str:
+        return f"gust sigma {self.gust['sigma']:.4g} deg, time constant {self.gust['time_constant']:.3g} s"
 
     def report(self) -> dict[str, Any]:
         return {"source_log": str(self.request.log), "sysid": self.sysid, "out": str(self.request.out),

@@ -72,6 +72,9 @@ __all__ = [
     "modes_of",
     "nrmse_fit",
     "plant_toml",
+    "disturbance_table",
+    "gust_from_residual",
+    "finite_or_none",
     "simulate",
 ]
 
@@ -161,11 +164,11 @@ class Identification:
     validation_run: dict[str, np.ndarray] = field(default_factory=dict, repr=False)  # t, y, y_hat (for plots)
     method: dict[str, Any] = field(default_factory=dict)  # least squares, and the output-error refinement's figures
     notes: list[str] = field(default_factory=list)
-    disturbance: dict[str, float] | None = None  # the gust the flight met: sigma, time_constant (_gust_from_residual)
+    disturbance: dict[str, float] | None = None  # the gust the flight met: sigma, time_constant (gust_from_residual)
 
     def report(self) -> dict[str, Any]:
         """A JSON-friendly summary (``fault-monitor identify --json``): strict JSON, a non-finite number is null."""
-        return _finite_or_none({
+        return finite_or_none({
             "h": self.h,
             "states": list(self.state_names),
             "inputs": list(self.input_names),
@@ -186,13 +189,13 @@ class Identification:
         })
 
 
-def _finite_or_none(value: Any) -> Any:
+def finite_or_none(value: Any) -> Any:
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: _finite_or_none(v) for k, v in value.items()}
+        return {k: finite_or_none(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_finite_or_none(v) for v in value]
+        return [finite_or_none(v) for v in value]
     return value
 
 
@@ -508,7 +511,7 @@ def identify(data: FlightData, holdout: float = HOLDOUT) -> Identification:
         present = ~np.isnan(y).any(axis=1)
         return (np.arange(k0, k1)[present] - k[0]) * h, y[present], y_hat[present]
 
-    disturbance = _gust_from_residual(k, X - op_x, U - op_u, A_v, B_v, names, h)
+    disturbance = gust_from_residual(k, X - op_x, U - op_u, A_v, B_v, names, h)
     tv, yv, yv_hat = run(split, end)
     _te, ye, ye_hat = run(start, split)
     fit_v = nrmse_fit(yv, yv_hat)
@@ -530,7 +533,7 @@ def identify(data: FlightData, holdout: float = HOLDOUT) -> Identification:
         validation_run={"t": tv, "y": yv, "y_hat": yv_hat}, method=method, notes=notes, disturbance=disturbance)
 
 
-def _gust_from_residual(k: np.ndarray, x: np.ndarray, u: np.ndarray, A_d: np.ndarray, B_d: np.ndarray,
+def gust_from_residual(k: np.ndarray, x: np.ndarray, u: np.ndarray, A_d: np.ndarray, B_d: np.ndarray,
                         names: tuple[str, ...], h: float) -> dict[str, float] | None:
     """The gust input the flight met, from the model's one-step residual: ``{"sigma", "time_constant", "samples"}``.
 
@@ -600,7 +603,7 @@ def _round(x: float, digits: int = 6) -> float:
 
 
 def disturbance_table(gust: dict[str, float], turbulence: str | None, source: str | None = None) -> list[str]:
-    """The ``[disturbance]`` table's lines for a gust measured by ``_gust_from_residual``."""
+    """The ``[disturbance]`` table's lines for a gust measured by ``gust_from_residual``."""
     lines = ["[disturbance]", "# the gust input d (through D_cd) the flight met, as a first-order Gauss-Markov process: "
              "what", "# the model's one-step residual shows along D_cd (calm air: the model's own error)",
              f"sigma = {_value(_round(gust['sigma']))}   # deg",
