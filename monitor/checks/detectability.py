@@ -49,6 +49,7 @@ import scipy.signal
 from monitor.errors import UserError
 from monitor.model.closed_loop import Gains, closed_loop, steady_state
 from monitor.model.delay_model import b0_of_tau, tau_grid
+from monitor.model.estimator import report_pole
 from monitor.model.plant import Plant
 
 __all__ = ["gust_sigma_ft_s", "scaled_disturbance", "NoiseFigures", "fhat_noise", "upcrossing_rate",
@@ -162,7 +163,8 @@ def fhat_noise(plant: Plant, gains: Gains, sigma: float, time_constant: float, p
         raise UserError(f"--false-alarms-per-hour must be a positive number, got {per_hour:g}")
     best = None
     for tau, loop in _loops(plant, gains, points):
-        v0, v1 = _noise_at(loop, plant.p, sigma, time_constant, plant.h, _keep(plant.h, report_time_constant))
+        keep = report_pole(plant.h, report_time_constant)
+        v0, v1 = _noise_at(loop, plant.p, sigma, time_constant, plant.h, keep)
         std, rho = math.sqrt(v0), v1 / v0 if v0 > 0 else 0.0
         c = gaussian_threshold(std, rho, plant.h, per_hour)
         if best is None or c > best[1]:
@@ -197,13 +199,8 @@ def _step(loop, p: int, samples: int, keep: float = 0.0) -> np.ndarray:
 def step_response(plant: Plant, gains: Gains, samples: int, report_time_constant: float | None = None,
                   points: int = GRID) -> np.ndarray:
     """``s(j)``, j = 0..samples: f_hat after a unit bias from sample 0, the smallest over constant delays."""
-    keep = _keep(plant.h, report_time_constant)
+    keep = report_pole(plant.h, report_time_constant)
     return np.min([_step(loop, plant.p, samples, keep) for _, loop in _loops(plant, gains, points)], axis=0)
-
-
-def _keep(h: float, report_time_constant: float | None) -> float:
-    """The reported estimate's low-pass pole ``e^{-h/T}`` (the gains' fault_time_constant); 0: none."""
-    return math.exp(-h / report_time_constant) if report_time_constant else 0.0
 
 
 def _augmented(loop, p: int, sigma: float, time_constant: float, h: float,
@@ -235,7 +232,7 @@ def gaussian_bias(plant: Plant, gains: Gains, sigma: float, time_constant: float
     ``min over windows of max over its samples of (threshold - n) / s``; ``b`` is their ``probability`` quantile.
     """
     rng = np.random.default_rng(seed)
-    keep = _keep(plant.h, report_time_constant)
+    keep = report_pole(plant.h, report_time_constant)
     best = (0.0, 0.0)
     for _, loop in _loops(plant, gains, points):
         A, B, C = _augmented(loop, plant.p, sigma, time_constant, plant.h, keep)

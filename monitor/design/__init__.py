@@ -7,7 +7,6 @@ objectives: ``fast`` (default, ``monitor.design.fast``) and ``hinf`` (the joint 
 
 from __future__ import annotations
 
-import math
 import time
 from typing import TYPE_CHECKING, Callable
 
@@ -43,9 +42,9 @@ def reported_error_bound(gamma_e: float, h: float, fault_time_constant: float | 
     and ``(1 - LP) f = a / (1 - a z^-1) Delta f``, whose gain is ``a / (1 - a)`` (at z = 1); ``|LP| <= 1``. Hence
     ``gamma_e + a / (1 - a)``: the certified loop's bound plus the filter's own lag, for every delay sequence.
     """
-    if not fault_time_constant:
-        return gamma_e
-    a = math.exp(-h / fault_time_constant)
+    from monitor.model.estimator import report_pole
+
+    a = report_pole(h, fault_time_constant)
     return gamma_e + a / (1.0 - a)
 
 

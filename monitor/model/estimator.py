@@ -42,7 +42,12 @@ import numpy as np
 from monitor.model.closed_loop import Gains
 from monitor.model.plant import Plant
 
-__all__ = ["EstimatorState", "StepResult", "Estimator"]
+__all__ = ["EstimatorState", "StepResult", "Estimator", "report_pole"]
+
+
+def report_pole(h: float, fault_time_constant: float | None) -> float:
+    """The reported estimate's low-pass pole ``a = e^{-h/T}`` (module docstring); 0 without a time constant."""
+    return math.exp(-h / fault_time_constant) if fault_time_constant else 0.0
 
 
 @dataclass
@@ -95,7 +100,7 @@ class Estimator:
         ``u_abs - u0``): the actuator limit holds for the absolute deflection, so ``u`` is saturated to
         ``[-limit - u0, limit - u0]``. None: zero. ``fault_time_constant``: seconds of the low-pass on the
         reported estimate (module docstring); None: reported as estimated."""
-        self._keep = math.exp(-plant.h / fault_time_constant) if fault_time_constant else 0.0
+        self._keep = report_pole(plant.h, fault_time_constant)
         gains.check_shapes(plant)
         self.plant = plant
         self.gains = gains
