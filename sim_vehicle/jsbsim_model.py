@@ -37,22 +37,18 @@ JSBSim documents in FGWinds.h: light 25 ft/s at 20 ft AGL and probability-of-exc
 mapped to 1 + s mod (2^31 - 2)). Same seed, same flight, to the bit (tested).
 
 JSBSim is imported here, lazily, so that ``import sim_vehicle`` and ``sim-vehicle --help`` never load it, and
-everything it prints (its banner, loading and trim messages go to the C++ stdout) is captured while loading
-and trimming, logged at DEBUG, and kept off the daemon's stdout.
+everything it says while loading and trimming (its loading and trim messages) is collected by a JSBSim logger of
+our own, logged at DEBUG, and kept off the daemon's stdout.
 """
 
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import logging
 import math
-import os
-import sys
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -105,32 +101,65 @@ def _import_jsbsim():
     except ImportError:  # pragma: no cover - jsbsim is a dependency
         raise UserError("--aircraft needs the jsbsim package (pip install 'jsbsim>=1.3.3,<1.4')") from None
     jsbsim.FGJSBBase().debug_lvl = 0  # no banner on construction (a class-wide switch)
+    # what JSBSim says in flight goes to the log (stderr), never to stdout: its default logger prints
+    jsbsim.set_logger(_logger_class(jsbsim)(_log_record))
     return jsbsim
 
 
-def _flush_c_stdio() -> None:
-    try:
-        ctypes.CDLL(None).fflush(None)
-    except (OSError, AttributeError, TypeError):  # pragma: no cover - a platform without a C library handle
-        pass
+def _logger_class(jsbsim):  # noqa: ANN001, ANN202 - the lazily imported module and a class made from it
+    """An ``FGLogger`` that hands each finished record (its text) to a Python callable."""
+
+    class RecordLogger(jsbsim.FGLogger):  # type: ignore[misc, name-defined]
+        def __init__(self, on_record: Callable[[str], None]) -> None:
+            super().__init__()
+            self._on_record = on_record
+            self._parts: list[str] = []
+
+        def set_level(self, level) -> None:  # noqa: ANN001
+            self._parts = []
+
+        def file_location(self, filename: str, line: int) -> None:
+            pass
+
+        def message(self, message: str) -> None:
+            self._parts.append(message)
+
+        def format(self, format) -> None:  # noqa: A002, ANN001 - JSBSim's own argument name
+            pass
+
+        def flush(self) -> None:
+            text, self._parts = "".join(self._parts), []
+            if text.strip():
+                self._on_record(text)
+
+    return RecordLogger
+
+
+def _log_record(text: str) -> None:
+    log.info("JSBSim: %s", " ".join(text.split()))
 
 
 @contextlib.contextmanager
-def _captured_stdout() -> Iterator[list[str]]:
-    """Send what C++ prints to file descriptor 1 into a buffer; the text is in the yielded list afterwards."""
-    sys.stdout.flush()
-    with tempfile.TemporaryFile() as tmp:
-        saved = os.dup(1)
-        box: list[str] = []
-        try:
-            os.dup2(tmp.fileno(), 1)
-            yield box
-        finally:
-            _flush_c_stdio()  # std::cout goes through C stdio (synced): flush it before fd 1 comes back
-            os.dup2(saved, 1)
-            os.close(saved)
-            tmp.seek(0)
-            box.append(tmp.read().decode("utf-8", "replace"))
+def _jsbsim_messages(jsbsim) -> Iterator[list[str]]:  # noqa: ANN001
+    """Collect what JSBSim logs inside the block; the text is in the yielded list afterwards.
+
+    Why a logger and not file descriptor 1: JSBSim 1.3 routes its messages through an ``FGLogger`` whose
+    default prints with Python's ``print``. Captured at the descriptor, a message sat in ``sys.stdout``'s
+    buffer whenever stdout was a pipe without ``PYTHONUNBUFFERED`` and reached the daemon's stdout at exit,
+    whatever the timing. A logger of our own receives each record as it is made, so nothing can leak.
+    JSBSim keeps one logger per thread: the one in place before the block is put back after it.
+    """
+    records: list[str] = []
+    logger = _logger_class(jsbsim)(records.append)
+    previous = jsbsim.get_logger()
+    jsbsim.set_logger(logger)
+    box: list[str] = []
+    try:
+        yield box
+    finally:
+        logger.flush()
+        jsbsim.set_logger(previous)
+        box.append("".join(records))
 
 
 def _reason(printed: str) -> str:
@@ -168,7 +197,7 @@ def _load_and_trim(jsbsim, spec: AircraftSpec):
     bundled = Path(jsbsim.get_default_root_dir())
     root, aircraft_path, add_name = _locate(spec.name, spec.aircraft_dir, bundled)
     what = f"--aircraft {spec.name}"
-    with _captured_stdout() as printed:
+    with _jsbsim_messages(jsbsim) as printed:
         fdm = jsbsim.FGFDMExec(str(root))
         fdm.set_debug_level(0)
         try:
@@ -191,7 +220,7 @@ def _load_and_trim(jsbsim, spec: AircraftSpec):
     fdm["ic/vc-kts"] = spec.airspeed_kt
     fdm["ic/gamma-deg"] = 0.0
     where = f"{spec.airspeed_kt:g} kt, {spec.altitude_ft:g} ft"
-    with _captured_stdout() as printed:
+    with _jsbsim_messages(jsbsim) as printed:
         try:
             fdm.run_ic()
             fdm["propulsion/set-running"] = -1  # every engine running
@@ -216,7 +245,7 @@ def _elevator_map(jsbsim, spec: AircraftSpec) -> tuple[np.ndarray, np.ndarray]:
     """Deflection (deg) per ``fcs/elevator-cmd-norm`` with the pitch trim at 0, from a throw-away instance."""
     probe = _load_and_trim(jsbsim, spec)
     try:
-        with _captured_stdout():
+        with _jsbsim_messages(jsbsim):
             probe.suspend_integration()
             probe["fcs/pitch-trim-cmd-norm"] = 0.0
             deg = []

@@ -7,6 +7,7 @@ Each flight here is at most 60 simulated seconds of c172p at 20 Hz (a fraction o
 from __future__ import annotations
 
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -179,8 +180,11 @@ def test_step_size_divides_the_sampling_period():
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
+    # stdout a pipe and block-buffered, as under a service manager or CI: with PYTHONUNBUFFERED set (many
+    # developers' shells) a message printed at the wrong moment reaches the pipe at once and a leak at exit hides
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
     return subprocess.run([sys.executable, "-m", "sim_vehicle", "run", "--no-zenoh", "--steps", "5", *args],
-                          capture_output=True, text=True, timeout=60, cwd=REPO)
+                          capture_output=True, text=True, timeout=60, cwd=REPO, env=env)
 
 
 @pytest.mark.parametrize("args, message", [
