@@ -155,10 +155,14 @@ def test_paper_scenario_estimates_alarm_status_and_recording(tmp_path: Path, gai
     assert settled is not None and settled - ONSET <= EARLIEST_SETTLING + SLACK, f"settled at k={settled}"
     assert [a["state"] for a in alarms] == ["raised"]
     assert ONSET < alarms[0]["k"] <= ONSET + 4
-    taus = sorted(e["tau"] for e in estimates if e["tau"] is not None)
-    # observed delay is in vehicle seconds: at 25x a 40 ms scheduling hiccup on a loaded machine reads as 1 s,
-    # so only the bulk must sit inside a sample interval; none may be negative
-    assert taus and taus[0] >= 0.0 and taus[len(taus) // 2] < 1.0
+    # the observed delay is the lateness of each arrival on the monitor's wall clock, in vehicle seconds: at 25x
+    # a 40 ms scheduling hiccup of a busy machine reads as a whole sample, so its size says how busy the machine
+    # was, not whether the code is right (DelayTracker's figures are checked against known lateness in
+    # tests/test_service_delay.py). What holds on any machine: it is reported for every sample once the clock
+    # fit has its 3 samples, and it is a finite lateness, never negative.
+    taus = {e["k"]: e["tau"] for e in estimates}
+    assert all(taus[k] is not None for k in range(3, 60)), [k for k in range(3, 60) if taus[k] is None]
+    assert all(0.0 <= taus[k] < float("inf") for k in range(3, 60))
 
     recording = load_recording(rrd)
     assert recording.has_footer
