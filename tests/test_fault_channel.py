@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from monitor.checks.norms import hinf_norm
+from monitor.model.norms import hinf_norm
 from monitor.design import default_fault_time_constant, reported_error_bound
 from monitor.model.closed_loop import closed_loop
 from monitor.model.delay_model import b0_of_tau

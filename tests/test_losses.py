@@ -14,7 +14,7 @@ from monitor.model.delay_model import b0_of_tau, b0_polytope, input_sum
 from monitor.model.estimator import Estimator
 from monitor.model.loss_model import loss_modes, macro_steps
 from monitor.model.plant import load_plant
-from monitor.checks.norms import contraction
+from monitor.model.norms import contraction
 from monitor.checks.verify_losses import verify_losses
 from tests.designs import designed
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from monitor.checks.norms import hinf_norm, hinf_norms
+from monitor.model.norms import hinf_norm, hinf_norms
 
 
 def _reference(A: np.ndarray, B: np.ndarray, C: np.ndarray, points: int = 20001) -> float:

@@ -8,7 +8,7 @@ import pytest
 from monitor.model.closed_loop import Gains
 from monitor.design.paper import lemma3_K2_K3
 from monitor.model.plant import load_plant
-from monitor.checks.norms import hinf_norm
+from monitor.model.norms import hinf_norm
 from monitor.checks.verify import _growth_rate, verify_gains
 
 

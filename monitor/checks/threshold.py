@@ -40,7 +40,7 @@ import scipy.linalg
 from monitor.model.closed_loop import Gains, closed_loop, steady_state
 from monitor.model.delay_model import b0_of_tau, b0_polytope, tau_grid, nominal_point
 from monitor.errors import UserError
-from monitor.checks.norms import dual_norms, induced_norms, norm_factor
+from monitor.model.norms import dual_norms, induced_norms, norm_factor
 from monitor.model.plant import Plant
 
 __all__ = ["ThresholdBound", "fault_threshold", "frozen_l1"]

@@ -31,7 +31,7 @@ from scipy.optimize import linprog
 from monitor.model.closed_loop import Gains, LoopMatrices, closed_loop, steady_state
 from monitor.model.delay_model import b0_of_tau, lag_curve, point_size, tau_grid
 from monitor.model.long_delay import lag_intervals
-from monitor.checks.norms import hinf_norm
+from monitor.model.norms import hinf_norm
 from monitor.model.plant import Plant
 
 __all__ = ["Verdict", "verify_gains"]

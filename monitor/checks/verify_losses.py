@@ -29,7 +29,7 @@ import numpy as np
 from monitor.model.closed_loop import Gains, closed_loop, steady_state
 from monitor.model.delay_model import b0_of_tau, b0_polytope, tau_grid
 from monitor.model.loss_model import check_max_losses, loss_modes, loss_sequences, macro_step_growth, macro_steps
-from monitor.checks.norms import contraction
+from monitor.model.norms import contraction
 from monitor.model.plant import Plant
 
 __all__ = ["LossVerdict", "verify_losses"]

@@ -38,7 +38,7 @@ from monitor.design.result import DesignResult
 from monitor.errors import DesignFailed
 from monitor.model.loss_model import macro_step_growth
 from monitor.model.plant import Plant
-from monitor.checks.norms import hinf_norms
+from monitor.model.norms import hinf_norms
 
 __all__ = ["design_fast", "deadbeat_observer", "mismatch_energy"]
 

@@ -22,7 +22,7 @@ from monitor.design.solve import EPS, SolveFailed, most_positive_eigenvalue, sol
 from monitor.errors import DesignFailed
 from monitor.model.loss_model import macro_steps
 from monitor.model.plant import Plant
-from monitor.checks.norms import contraction
+from monitor.model.norms import contraction
 
 __all__ = ["loss_certificate", "certify_losses", "CONTRACTION"]
 

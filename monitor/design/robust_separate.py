@@ -32,7 +32,7 @@ from monitor.design.result import DesignResult
 from monitor.design.separate import observer_alone
 from monitor.errors import DesignFailed
 from monitor.model.plant import Plant
-from monitor.checks.norms import hinf_norm
+from monitor.model.norms import hinf_norm
 
 __all__ = ["design_robust_separate", "robust_controller_alone"]
 

@@ -23,7 +23,7 @@ from monitor.design.result import DesignResult
 from monitor.design.solve import Solved, SolveFailed, solve_checked
 from monitor.errors import DesignFailed
 from monitor.model.plant import Plant
-from monitor.checks.norms import hinf_norm
+from monitor.model.norms import hinf_norm
 
 __all__ = ["design_separate", "observer_alone", "controller_alone"]
 

@@ -1,4 +1,4 @@
-"""Norms every check and design here shares: quadratic norms ``||x||_P = sqrt(x' P x)`` and the H-infinity norm.
+"""Norms the designs and the checks share: quadratic norms ``||x||_P = sqrt(x' P x)`` and the H-infinity norm.
 
 Why one module: ``verify --max-losses`` and ``threshold`` both turn a candidate P (from an LMI, a Lyapunov
 equation or a file) into a proof by recomputing, in numpy, how much each matrix stretches vectors in that
