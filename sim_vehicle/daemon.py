@@ -18,17 +18,15 @@ from dataclasses import dataclass
 
 from monitor.wire.mavlink import (
     VEHICLE_COMPONENT,
-    Sample,
     bump_signing_clock,
     enable_signing,
     encode_heartbeat,
-    encode_sample,
     new_codec,
 )
+from monitor.wire.telemetry import Sample, encode_sample
 from sim_vehicle.flight_model import FlightModelError
 from sim_vehicle.link import CommandDecoder
 from sim_vehicle.simulation import Simulation
-from sim_vehicle.telemetry import AircraftSample, encode_aircraft_sample
 from sim_vehicle.truth import TruthPublisher
 
 __all__ = ["UdpSink", "VehicleProtocol", "run_daemon"]
@@ -62,10 +60,7 @@ class UdpSink:
             log.debug("send failed: %s", exc)
 
     def send_sample(self, sample: Sample) -> None:
-        if isinstance(sample, AircraftSample):
-            self._send(encode_aircraft_sample(self.mav, sample, self.h))
-        else:
-            self._send(encode_sample(self.mav, sample, self.h))
+        self._send(encode_sample(self.mav, sample, self.h))
 
     def send_heartbeat(self) -> None:
         if self.key is not None:  # keep both signing clocks at wall-clock time (see the ecosystem notes)

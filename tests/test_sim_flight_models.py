@@ -20,7 +20,7 @@ from sim_vehicle.excitation import Excitation, parse_excite_spec
 from sim_vehicle.flight_model import FlightModel
 from sim_vehicle.jsbsim_model import AircraftSpec, JSBSimFlightModel
 from sim_vehicle.simulation import Simulation
-from sim_vehicle.telemetry import AircraftSample, encode_aircraft_sample
+from monitor.wire.telemetry import AircraftSample, encode_sample
 from tests.test_sim_simulation import Recorder
 
 PLANT = load_plant("paper-continuous")
@@ -119,7 +119,7 @@ def test_an_aircraft_vehicle_file_sets_the_aircraft_flags(tmp_path):
 def test_aircraft_telemetry_is_the_contract_plus_pitch_and_vfr_hud_in_one_datagram():
     sample = AircraftSample(sysid=3, k=7, t=0.35, alpha_deg=1.25, q_deg_s=-2.0, elevator_deg=4.3, theta_deg=3.0,
                             airspeed_m_s=51.4, attitude=(0.01, 1.5, 0.002, -0.003), hud=(51.0, 86.4, 71, 914.4, -0.2))
-    data = encode_aircraft_sample(new_codec(3, 1), sample, 0.05)
+    data = encode_sample(new_codec(3, 1), sample, 0.05)
     msgs = {m.get_type(): m for m in new_codec(255, 190).parse_buffer(data)}
     assert list(msgs) == ["ATTITUDE", "AOA_SSA", "VFR_HUD", "ACTUATOR_OUTPUT_STATUS"]
     att, aoa, hud, act = msgs["ATTITUDE"], msgs["AOA_SSA"], msgs["VFR_HUD"], msgs["ACTUATOR_OUTPUT_STATUS"]

@@ -20,7 +20,7 @@ from monitor.wire.specs import parse_delay_spec, parse_fault_spec
 from sim_vehicle.excitation import Excitation
 from sim_vehicle.jsbsim_model import AircraftSpec, JSBSimFlightModel, jsbsim_seed, step_size
 from sim_vehicle.simulation import Simulation
-from sim_vehicle.telemetry import AircraftSample
+from monitor.wire.telemetry import AircraftSample
 from tests.test_sim_simulation import Recorder
 
 REPO = Path(__file__).resolve().parent.parent

@@ -42,16 +42,19 @@ Why names and not just a list of fields: the recording and the replay report rea
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 from monitor.errors import UserError
 from monitor.link.dialect import MessageLayout, layout_by_name
+from monitor.wire.mavlink import ELEVATOR_FULL_SCALE_DEG, PITCH_CHANNEL
+from monitor.wire.telemetry import INSTANT_MESSAGE, field_of
 
-__all__ = ["Signal", "CommandMap", "SignalMap", "DEFAULT_SIGNALS_TOML", "default_signal_map", "parse_signals",
+__all__ = ["Signal", "CommandMap", "SignalMap", "DEFAULT_SIGNALS_TOML", "contract_signals_toml", "default_signal_map", "parse_signals",
            "load_signals_file", "signals_for_plant", "Layouts", "MAVLINK"]
 
 
@@ -75,23 +78,47 @@ class Layouts:
 
 MAVLINK = Layouts()
 
-DEFAULT_SIGNALS_TOML = """
-[signals]
-instant = "AOA_SSA"
-outputs = ["alpha"]
-actuator = ["elevator"]
+def contract_signals_toml(measured: Sequence[str], outputs: Sequence[str] | None = None,
+                          actuator: Sequence[str] = ("elevator",), ranges: bool = True) -> str:
+    """A ``[signals]`` table for the quantities ``measured`` as the contract carries them.
 
-[signals.measured]
-alpha = { field = "AOA_SSA.AOA", unit = "deg", range = [-90.0, 90.0] }
-q = { field = "ATTITUDE.pitchspeed", scale = 57.29577951308232, unit = "deg/s", range = [-2000.0, 2000.0] }
-elevator = { field = "ACTUATOR_OUTPUT_STATUS.actuator[0]", unit = "deg", range = [-90.0, 90.0] }
+    Built from ``monitor.wire.telemetry.SAMPLE_FIELDS`` and the contract's command, so the live default map,
+    identify's aircraft map and the vehicle's encoder cannot disagree on a message, a field or a scale.
 
-[signals.command]
-message = "SET_ACTUATOR_CONTROL_TARGET"
-channels = [1]
-full_scale = [30.0]
-group = 0
-"""
+    >>> print(contract_signals_toml(["alpha", "elevator"], ["alpha"], ranges=False))  # doctest: +NORMALIZE_WHITESPACE
+    [signals]
+    instant = "AOA_SSA"
+    outputs = ["alpha"]
+    actuator = ["elevator"]
+    [signals.measured]
+    alpha = { field = "AOA_SSA.AOA", unit = "deg" }
+    elevator = { field = "ACTUATOR_OUTPUT_STATUS.actuator[0]", unit = "deg" }
+    [signals.command]
+    message = "SET_ACTUATOR_CONTROL_TARGET"
+    channels = [1]
+    full_scale = [30.0]
+    group = 0
+    """
+    lines = ["[signals]", f"instant = {json.dumps(INSTANT_MESSAGE)}"]
+    if outputs is not None:
+        lines.append(f"outputs = {json.dumps(list(outputs))}")
+    lines += [f"actuator = {json.dumps(list(actuator))}", "[signals.measured]"]
+    for name in measured:
+        f = field_of(name)
+        parts = [f"field = {json.dumps(f.ref)}"]
+        if f.scale != 1.0:
+            parts.append(f"scale = {f.scale!r}")
+        parts.append(f"unit = {json.dumps(f.unit)}")
+        if ranges:
+            parts.append(f"range = [{f.range[0]!r}, {f.range[1]!r}]")
+        lines.append(f"{name} = {{ {', '.join(parts)} }}")
+    lines += ["[signals.command]", 'message = "SET_ACTUATOR_CONTROL_TARGET"', f"channels = [{PITCH_CHANNEL}]",
+              f"full_scale = [{ELEVATOR_FULL_SCALE_DEG!r}]", "group = 0"]
+    return "\n".join(lines) + "\n"
+
+
+# what the monitor reads from a vehicle when the plant file has no [signals]: the linear plant's sample
+DEFAULT_SIGNALS_TOML = contract_signals_toml(["alpha", "q", "elevator"], outputs=["alpha"])
 
 _TOP_KEYS = {"instant", "outputs", "actuator", "record", "measured", "command", "operating_point"}
 _SIGNAL_KEYS = {"field", "scale", "offset", "unit", "range", "hold"}

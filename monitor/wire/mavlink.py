@@ -1,8 +1,8 @@
 """The MAVLink side of the contract, shared by the vehicle and the monitor so both agree on units.
 
-Vehicle -> monitor, each sample k (one datagram, so loss and reordering act on whole samples):
-``ATTITUDE`` (pitchspeed = q in rad/s, time_boot_ms = k h in ms), ``AOA_SSA`` (AOA = alpha in degrees,
-time_usec = k h in us), ``ACTUATOR_OUTPUT_STATUS`` (actuator[0] = applied elevator in degrees, active = 1).
+Vehicle -> monitor, each sample k (one datagram): its messages and fields are defined once, in
+``monitor.wire.telemetry`` (``SAMPLE_FIELDS``), which also encodes them; this module holds the codec and the
+instants.
 Monitor -> vehicle: ``SET_ACTUATOR_CONTROL_TARGET`` with ``time_usec`` = the sampling instant it answers,
 group 0, ``controls[1]`` (the pitch channel) = elevator command / ``ELEVATOR_FULL_SCALE_DEG``
 (MAVLink controls are normalised to [-1, 1]). Plant units are degrees and deg/s; the wire uses MAVLink's.
@@ -13,7 +13,6 @@ the socket; the daemons own their asyncio sockets and need one parser per peer.
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 
@@ -24,12 +23,10 @@ __all__ = [
     "mavlink",
     "ELEVATOR_FULL_SCALE_DEG",
     "PITCH_CHANNEL",
-    "Sample",
     "Command",
     "new_codec",
     "FrameSink",
     "enable_signing",
-    "encode_sample",
     "encode_command",
     "encode_heartbeat",
     "sample_instant_us",
@@ -44,18 +41,6 @@ ELEVATOR_FULL_SCALE_DEG = 30.0
 PITCH_CHANNEL = 1
 MONITOR_COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 VEHICLE_COMPONENT = mavlink.MAV_COMP_ID_AUTOPILOT1
-
-
-@dataclass(frozen=True)
-class Sample:
-    """What the vehicle reports at sampling instant k (plant units)."""
-
-    sysid: int
-    k: int
-    t: float  # sampling instant, seconds of simulated time
-    alpha_deg: float
-    q_deg_s: float
-    elevator_deg: float
 
 
 @dataclass(frozen=True)
@@ -122,21 +107,6 @@ def sample_instant_us(k: int, h: float) -> int:
 
 def sample_index(time_usec: int, h: float) -> int:
     return int(round(time_usec / (h * 1e6)))
-
-
-def encode_sample(mav: mavlink.MAVLink, sample: Sample, h: float) -> bytes:
-    """The three telemetry frames of one sample, concatenated into one datagram."""
-    t_us = sample_instant_us(sample.k, h)
-    frames = [
-        mavlink.MAVLink_attitude_message(
-            int(t_us // 1000) & 0xFFFFFFFF, 0.0, 0.0, 0.0, 0.0, math.radians(sample.q_deg_s), 0.0
-        ),
-        mavlink.MAVLink_aoa_ssa_message(t_us, float(sample.alpha_deg), 0.0),
-        mavlink.MAVLink_actuator_output_status_message(t_us, 1, [float(sample.elevator_deg)] + [0.0] * 31),
-    ]
-    for msg in frames:
-        mav.send(msg)
-    return mav.file.take()
 
 
 def encode_command(mav: mavlink.MAVLink, command: Command, h: float) -> bytes:
