@@ -30,7 +30,7 @@ def _progress(text: str, final: bool = False) -> None:
 def run_one(name: str, airspeed: float, rate: float, work: Path, margin: bool) -> None:
     from monitor.checks.threshold import fault_threshold
     from monitor.checks.verify import verify_gains
-    from monitor.commands.identify import IdentifyRequest, identify_log
+    from monitor.pipelines.identify_log import IdentifyRequest, identify_log
     from monitor.demo.aircraft import record_identification_flight
     from monitor.demo.live import Aircraft
     from monitor.design import run_design

@@ -31,12 +31,12 @@ def in_process(log: Path) -> tuple[float, float, int]:
 
     import numpy as np
 
-    from monitor.commands.identify import IDENTIFY_SIGNALS_TOML, _map_for
+    from monitor.pipelines.identify_log import IDENTIFY_SIGNALS_TOML, map_for
     from monitor.link.flight_log import log_spacing, read_flight
     from monitor.model.identification import MODELS, FlightData, identify
 
     states = MODELS["longitudinal"]
-    smap, _written = _map_for(tomllib.loads(IDENTIFY_SIGNALS_TOML)["signals"], "default", states)
+    smap, _written = map_for(tomllib.loads(IDENTIFY_SIGNALS_TOML)["signals"], "default", states)
     t = time.perf_counter()
     h = log_spacing(str(log), smap.instant, None)
     flight = read_flight(str(log), smap, h)

@@ -91,7 +91,7 @@ def _layouts(kind: str):
 def test_signal_maps_are_read_by_the_map_reader(block: Block) -> None:
     """A map with ``outputs`` as run and analyse read it (for a plant with as many outputs as C has rows, when the
     block shows C); one without, as identify reads it for each of its models."""
-    from monitor.commands.identify import _map_for
+    from monitor.pipelines.identify_log import map_for
     from monitor.link.signals import parse_signals
     from monitor.model.identification import MODELS
 
@@ -99,7 +99,7 @@ def test_signal_maps_are_read_by_the_map_reader(block: Block) -> None:
     table, where, layouts = raw["signals"], f"README.md:{block.line}", _layouts(block.arg("layouts"))
     if "outputs" not in table:
         for states in MODELS.values():
-            assert _map_for(table, where, states, layouts)[0].outputs == states
+            assert map_for(table, where, states, layouts)[0].outputs == states
         return
     outputs = len(raw["C"]) if "C" in raw else len(table["outputs"])
     smap = parse_signals(table, where, outputs, len(table["actuator"]), layouts)

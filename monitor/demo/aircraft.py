@@ -38,7 +38,7 @@ from monitor.errors import UserError
 from sim_vehicle.excitation import Excitation, parse_excite_spec
 
 if TYPE_CHECKING:
-    from monitor.commands.identify import IdentifiedLog
+    from monitor.pipelines.identify_log import IdentifiedLog
     from monitor.demo.orchestrate import Designed, DesignFn, FailedDesign, Flown, Progress
 
 __all__ = ["MODELS", "LATE_S", "AircraftDemoOptions", "run_aircraft_demo", "record_identification_flight"]
@@ -151,7 +151,7 @@ def _identification_log(opt: AircraftDemoOptions, progress: Progress) -> Path:
 
 
 def _identify_models(opt: AircraftDemoOptions, tlog: Path, progress: Progress) -> dict[str, IdentifiedLog]:
-    from monitor.commands.identify import IdentifyRequest, identify_log
+    from monitor.pipelines.identify_log import IdentifyRequest, identify_log
 
     sc = opt.scenario
     out: dict[str, IdentifiedLog] = {}
