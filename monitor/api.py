@@ -198,13 +198,13 @@ def read_gains(path: str | Path) -> Gains:
 
 def read_recording(path: str | Path):
     """Every vehicle's rows of a recording (``.rrd`` from ``run``/``analyse``): ``Recording.vehicles[sysid]``."""
-    from monitor.replay import load_recording
+    from monitor.service.recording_reader import load_recording
 
     return load_recording(path)
 
 
 def report(path: str | Path, fault: str | None = None) -> dict[str, Any]:
     """``fault-monitor replay --json`` as a dict: settling, RMS of e_f, alarms, ... of a recording."""
-    from monitor.replay import analyse
+    from monitor.scoring import score_recording
 
-    return analyse(read_recording(path), fault_spec=fault)
+    return score_recording(read_recording(path), fault_spec=fault)

@@ -105,9 +105,10 @@ def test_analyse_command_report_json_and_rrd(tmp_path: Path, gains: Path) -> Non
     assert out.returncode == 0, out.stderr
     report = json.loads(out.stdout)
     assert report["samples"] == STEPS and report["onset_k"] == ONSET + 5 and report["log"]["processed"] == STEPS
-    from monitor.replay import analyse, load_recording
+    from monitor.scoring import score_recording
+    from monitor.service.recording_reader import load_recording
 
-    again = analyse(load_recording(rrd), fault_spec=f"bias:2@{ONSET + 5}")
+    again = score_recording(load_recording(rrd), fault_spec=f"bias:2@{ONSET + 5}")
     assert again["samples"] == STEPS and again["rms_ef"] == pytest.approx(report["rms_ef"])
 
 

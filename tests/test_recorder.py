@@ -18,8 +18,8 @@ import pytest
 os.environ.setdefault("RERUN_ANALYTICS", "0")
 
 from monitor.errors import UserError  # noqa: E402
-from monitor.replay import load_recording  # noqa: E402
 from monitor.service.recorder import RrdRecorder  # noqa: E402
+from monitor.service.recording_reader import load_recording  # noqa: E402
 from monitor.service.records import SampleRecord, TruthRecord  # noqa: E402
 
 ONSET, SIZE, LAG = 20, 2.0, 5

@@ -9,8 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from monitor.replay import analyse, load_recording
+from monitor.scoring import score_recording
 from monitor.service.recorder import RrdRecorder
+from monitor.service.recording_reader import load_recording
 from monitor.service.records import SampleRecord
 
 
@@ -31,7 +32,7 @@ def test_a_restarted_vehicle_keeps_both_runs(tmp_path: Path) -> None:
     recording = load_recording(path)
     samples = recording.vehicles[1].samples
     assert len(samples) == 80 and [s.run for s in samples] == [0] * 50 + [1] * 30
-    report = analyse(recording)
+    report = score_recording(recording)
     assert report["samples"] == 80 and report["runs"] == 2 and report["last_run_samples"] == 30
 
 

@@ -7,8 +7,9 @@ import sys
 import time
 from pathlib import Path
 
-from monitor.replay import analyse, load_recording
+from monitor.scoring import score_recording
 from monitor.service.recorder import RrdRecorder
+from monitor.service.recording_reader import load_recording
 from monitor.service.records import SampleRecord, TruthRecord
 
 
@@ -27,11 +28,11 @@ def _recording(path: Path, truth: bool) -> Path:
 
 def test_false_alarms_do_not_depend_on_how_the_onset_was_learned(tmp_path: Path) -> None:
     bare = load_recording(_recording(tmp_path / "bare.rrd", truth=False))
-    assert analyse(bare)["false_alarms"] is None  # no truth, no SPEC: a raise cannot be called false
-    assert analyse(bare, fault_spec="bias:2@20")["false_alarms"] == 1
+    assert score_recording(bare)["false_alarms"] is None  # no truth, no SPEC: a raise cannot be called false
+    assert score_recording(bare, fault_spec="bias:2@20")["false_alarms"] == 1
     with_truth = load_recording(_recording(tmp_path / "truth.rrd", truth=True))
-    assert analyse(with_truth)["false_alarms"] == 1
-    both = analyse(with_truth, fault_spec="bias:2@30")
+    assert score_recording(with_truth)["false_alarms"] == 1
+    both = score_recording(with_truth, fault_spec="bias:2@30")
     assert both["fault_source"] == "spec" and both["onset_k"] == 30 and "also holds" in both["fault_note"]
 
 

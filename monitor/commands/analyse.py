@@ -42,8 +42,9 @@ def run(args: argparse.Namespace) -> int:
     from monitor.commands.replay import format_report
     from monitor.commands.run import alarm_from_args, load_models
     from monitor.errors import UserError
-    from monitor.replay import Recording, VehicleSeries, analyse
+    from monitor.scoring import score_recording
     from monitor.service.offline import analyse_log
+    from monitor.service.recording_reader import Recording, VehicleSeries
     from monitor.wire.specs import parse_fault_spec
 
     if args.sysid is not None and not 1 <= args.sysid <= 255:
@@ -103,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     recording = Recording(path=Path(args.rrd or args.tlog), application_id="fault-monitor analyse",
                           properties={**properties, "fault_monitor_version": __version__}, vehicles=vehicles,
                           has_footer=True)
-    report = analyse(recording, sysid=args.sysid, fault_spec=args.fault)
+    report = score_recording(recording, sysid=args.sysid, fault_spec=args.fault)
     report["log"] = {"records": result.log_records, "skipped_bytes": result.skipped_bytes,
                      "truncated": result.truncated, "seconds": round(result.seconds, 3), **result.counts,
                      "inventory": inventory.as_dict()}

@@ -52,7 +52,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from monitor.errors import UserError
-    from monitor.replay import analyse, load_recording
+    from monitor.scoring import score_recording
+    from monitor.service.recording_reader import load_recording
 
     if not 0 < args.tol < 1:
         raise UserError(f"--tol must be a fraction in (0, 1), got {args.tol}")
@@ -60,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
         from monitor.wire.specs import parse_fault_spec
 
         parse_fault_spec(args.fault)  # a bad SPEC is one line before the file is read, truth or not
-    report = analyse(load_recording(args.file), sysid=args.sysid, fault_spec=args.fault, tol=args.tol)
+    report = score_recording(load_recording(args.file), sysid=args.sysid, fault_spec=args.fault, tol=args.tol)
     if args.json:
         print(json.dumps(report))
     else:

@@ -51,11 +51,12 @@ class Row:
 
 def trace_from_recording(rrd: Path, fault_spec: str) -> tuple[Trace, dict]:
     """The series the figures need, read back from the recording, plus ``replay``'s analysis of it."""
-    from monitor.replay import analyse, load_recording
+    from monitor.scoring import score_recording
+    from monitor.service.recording_reader import load_recording
     from monitor.wire.specs import parse_fault_spec
 
     recording = load_recording(rrd)
-    report = analyse(recording, fault_spec=fault_spec)
+    report = score_recording(recording, fault_spec=fault_spec)
     series = next(iter(recording.vehicles.values()))
     s = series.samples
     k = np.array([r.k for r in s], dtype=int)

@@ -45,8 +45,9 @@ Entity paths (units: deg, deg/s, s; vectors are split into one scalar entity per
 
 Timelines: ``sample`` (sequence, k), ``time`` (duration, the sampling instant t in s) and, for the
 monitor's own rows, ``wall_time`` (timestamp, receive time). Recording properties (strings) sit under
-``/__properties/fault_monitor``; ``layout`` names the version of this table. ``monitor.replay`` reads
-the same paths back; ``RECORDING.md`` beside this file is the user-facing copy of the table.
+``/__properties/fault_monitor``; ``layout`` names the version of this table.
+``monitor.service.recording_reader`` reads the same paths back; ``RECORDING.md`` beside this file is the
+user-facing copy of the table.
 """
 
 from __future__ import annotations

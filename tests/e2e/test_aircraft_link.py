@@ -190,7 +190,7 @@ def test_closed_loop_about_an_operating_point_commands_are_absolute(tmp_path: Pa
     vehicle = report["vehicles"]["21"]
     assert vehicle["samples"] == STEPS and vehicle["settling_steps"] is not None and vehicle["settling_steps"] <= 6
     assert json.loads(report["properties"]["operating_point"]) == OP
-    from monitor.replay import load_recording
+    from monitor.service.recording_reader import load_recording
 
     rows = load_recording(rrd).vehicles[21].samples
     assert abs(rows[0].alpha - OP["alpha"]) < 1e-4
@@ -245,7 +245,7 @@ def test_observe_only_about_an_operating_point_and_analyse_of_the_log(tmp_path: 
     report = json.loads(_cli("analyse", str(tlog_path), "--plant", str(plant_path), "--gains", str(gains_path),
                              "--json", "--rrd", str(rrd), "--fault", f"bias:{BIAS}@{K0 + ONSET}"))
     assert report["log"]["processed"] == STEPS and report["vehicles"]["22"]["settling_steps"] <= 6
-    from monitor.replay import load_recording
+    from monitor.service.recording_reader import load_recording
 
     offline = {r.k - K0: r.f_hat[0] for r in load_recording(rrd).vehicles[22].samples}
     assert sorted(offline) == list(range(STEPS))

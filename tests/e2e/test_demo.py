@@ -9,7 +9,8 @@ import sys
 
 import pytest
 
-from monitor.replay import analyse, load_recording
+from monitor.scoring import score_recording
+from monitor.service.recording_reader import load_recording
 
 
 def demo(out, *args: str, timeout: float = 150) -> dict:
@@ -31,7 +32,7 @@ def test_live_demo_table_comes_from_the_run(out):
     assert row["method"] == "certified" and row["stable"] and row["certificate"] == "valid"
     assert row["samples"] >= 38
     rrd = out / "certified.rrd"
-    report = analyse(load_recording(rrd), fault_spec="bias:2@10")
+    report = score_recording(load_recording(rrd), fault_spec="bias:2@10")
     assert report["samples"] == row["samples"] and report["settling_steps"] == row["settling_steps"]
     assert report["rms_ef_after_onset"] == pytest.approx(row["rms_ef"])
     assert row["settling_steps"] is not None and 2 <= row["settling_steps"] <= 10

@@ -56,7 +56,7 @@ def headless_viewer(tmp_path: Path, port: int, out: Path) -> Iterator[subprocess
 
 def _load_when_complete(path: Path, samples: int, timeout: float = 10.0):
     """The viewer writes its file from its own threads: read it back once it holds ``samples`` samples."""
-    from monitor.replay import load_recording
+    from monitor.service.recording_reader import load_recording
 
     got = {}
 
@@ -73,7 +73,7 @@ def _load_when_complete(path: Path, samples: int, timeout: float = 10.0):
 
 
 def test_the_viewer_and_the_file_get_every_sample(tmp_path: Path, gains_file: Path) -> None:
-    from monitor.replay import load_recording
+    from monitor.service.recording_reader import load_recording
     from rerun.chunk import RrdReader
 
     port, vport = free_udp_port(), free_tcp_port()
@@ -129,7 +129,7 @@ def test_a_viewer_that_dies_or_never_answers_costs_neither_the_loop_nor_the_file
             wait_for(lambda: f"live viewer {url} " in monitor.log(), 5, what="the lost viewer's WARNING")
             monitor.signal(signal.SIGTERM)
             assert monitor.wait(10) == 0, monitor.log()
-    from monitor.replay import load_recording
+    from monitor.service.recording_reader import load_recording
 
     log = monitor.log()
     n = processed_count(log)

@@ -144,7 +144,7 @@ def test_closed_loop_with_mavproxy_listening_for_its_outputs(tmp_path: Path, gai
 
 
 def test_observe_only_live_and_from_mavproxys_tlog_agree(tmp_path: Path, gains_file: Path) -> None:
-    from monitor.replay import load_recording
+    from monitor.service.recording_reader import load_recording
 
     monitor_port, master_port = free_udp_port(), free_udp_port()
     live_rrd, offline_rrd = tmp_path / "live.rrd", tmp_path / "offline.rrd"

@@ -128,7 +128,7 @@ def settling_k(estimates: list[dict], truth: float, tol: float) -> int | None:
 
 
 def test_paper_scenario_estimates_alarm_status_and_recording(tmp_path: Path, gains_file: Path) -> None:
-    from monitor.replay import load_recording
+    from monitor.service.recording_reader import load_recording
 
     port, rrd = free_udp_port(), tmp_path / "paper.rrd"
     with zenoh_bus() as bus:
@@ -173,7 +173,7 @@ def test_paper_scenario_estimates_alarm_status_and_recording(tmp_path: Path, gai
 
 
 def test_sigterm_mid_run_leaves_a_complete_recording(tmp_path: Path, gains_file: Path) -> None:
-    from monitor.replay import load_recording
+    from monitor.service.recording_reader import load_recording
 
     port, rrd = free_udp_port(), tmp_path / "cut.rrd"
     with zenoh_bus() as bus:
