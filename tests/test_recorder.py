@@ -81,10 +81,11 @@ def test_every_sample_and_truth_row_comes_back(tmp_path: Path) -> None:
     assert set(recording.vehicles) == {1, 2}
     for sysid, (samples, truths) in runs.items():
         got = recording.vehicles[sysid]
-        assert [r.k for r in got.samples] == [r.k for r in samples] and len(samples) == 198
+        assert len(samples) == 198 and len(got.samples) == len(samples)  # zip below stops at the shorter
+        assert [r.k for r in got.samples] == [r.k for r in samples]
         for g, w in zip(got.samples, samples):
             assert_same(g, w)
-        assert len(got.truth) == 200
+        assert len(truths) == 200 and len(got.truth) == len(truths)
         for g, w in zip(got.truth, truths):
             assert_same(g, w)
     props = recording.properties
@@ -187,7 +188,11 @@ def test_numpy_fields_from_the_estimator_are_accepted(tmp_path: Path) -> None:
         for s in samples:
             rec.submit(dataclasses.replace(s, x_hat=np.array(s.x_hat), f_hat=np.array(s.f_hat), u=np.array(s.u),
                                            residual=np.array(s.residual), alpha=np.float64(s.alpha), alarm=np.bool_(s.alarm)))
-    for got, want in zip(load_recording(path).vehicles[4].samples, samples):
+    recording = load_recording(path)
+    assert set(recording.vehicles) == {4}
+    got_samples = recording.vehicles[4].samples
+    assert len(samples) == 10 and len(got_samples) == len(samples)  # zip below stops at the shorter
+    for got, want in zip(got_samples, samples):
         assert_same(got, want)
 
 
