@@ -219,7 +219,7 @@ def inprocess(plant: Path, gains: Path, n: int = 20_000) -> None:
     from monitor.link.frames import FrameParser
     from monitor.service.daemon import MonitorConfig, build_pipeline
     from monitor.service.publisher import EstimatePublisher
-    from monitor.service.vehicles import Fleet, load_model
+    from monitor.service.fleet_file import Fleet, load_model
     from monitor.wire.zenoh_session import build_config, close_quietly, open_session
 
     class NullLink:

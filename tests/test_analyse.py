@@ -16,7 +16,7 @@ from monitor.link.signals import default_signal_map
 from monitor.model.plant import load_plant
 from monitor.service.alarm import AlarmConfig
 from monitor.service.offline import analyse_log
-from monitor.service.vehicles import Fleet, load_model
+from monitor.service.fleet_file import Fleet, load_model
 from monitor.wire.mavlink import mavlink, new_codec
 from tests.e2e.wire_peer import read_gains
 

@@ -223,7 +223,7 @@ def test_analyse_gives_the_same_estimates_from_a_dataflash_log_and_a_tlog(tmp_pa
     from monitor.link.dataflash import open_dataflash
     from monitor.service.alarm import AlarmConfig
     from monitor.service.offline import analyse_dataflash, analyse_log
-    from monitor.service.vehicles import Fleet, load_model
+    from monitor.service.fleet_file import Fleet, load_model
 
     f_hat = {}
     for log in (dataflash, text):

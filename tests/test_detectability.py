@@ -162,7 +162,7 @@ def _main(argv: list[str]) -> int:
 def test_run_auto_threshold_takes_the_turbulence_level(aired_files):
     from monitor.checks.detectability import turbulence_threshold
     from monitor.commands.run import alarm_from_args
-    from monitor.service.vehicles import Fleet, load_model
+    from monitor.service.fleet_file import Fleet, load_model
 
     plant, gains = aired_files
     model = load_model(plant, gains)

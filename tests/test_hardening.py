@@ -14,7 +14,8 @@ from monitor.link.frames import FrameCounters, FrameEncoder, FrameParser
 from monitor.link.signing import Signer
 from monitor.service.alarm import AlarmConfig
 from monitor.service.pipeline import Pipeline
-from monitor.service.vehicles import Fleet, VehicleTable, load_model
+from monitor.service.fleet_file import Fleet, load_model
+from monitor.service.vehicles import VehicleTable
 from monitor.wire.mavlink import mavlink, new_codec
 from tests.test_service_vehicles import _gains_file
 

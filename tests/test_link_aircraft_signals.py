@@ -23,7 +23,8 @@ from monitor.model.estimator import Estimator
 from monitor.model.plant import parse_plant
 from monitor.service.alarm import AlarmConfig
 from monitor.service.offline import analyse_log
-from monitor.service.vehicles import Fleet, VehicleTable, load_model
+from monitor.service.fleet_file import Fleet, load_model
+from monitor.service.vehicles import VehicleTable
 from monitor.wire.mavlink import mavlink, new_codec
 
 DEG = 57.29577951308232

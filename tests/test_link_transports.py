@@ -135,7 +135,8 @@ def test_a_mavlink1_peer_is_answered_in_mavlink1_and_a_signed_link_refuses_it(tm
     from monitor.link.transports import open_link
     from monitor.service.alarm import AlarmConfig
     from monitor.service.pipeline import Pipeline
-    from monitor.service.vehicles import Fleet, VehicleTable, load_model
+    from monitor.service.fleet_file import Fleet, load_model
+    from monitor.service.vehicles import VehicleTable
     from monitor.wire.mavlink import mavlink, new_codec
     from tests.test_service_vehicles import _gains_file
 

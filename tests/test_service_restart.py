@@ -11,7 +11,8 @@ from pathlib import Path
 
 from monitor.link.dialect import layout_by_name
 from monitor.service.alarm import AlarmConfig
-from monitor.service.vehicles import Fleet, VehicleTable, load_model
+from monitor.service.fleet_file import Fleet, load_model
+from monitor.service.vehicles import VehicleTable
 from tests.test_service_vehicles import feed, gains_path  # noqa: F401 (gains_path is a fixture)
 
 _ATTITUDE = layout_by_name("ATTITUDE")

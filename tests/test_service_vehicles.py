@@ -14,7 +14,8 @@ from monitor.gains import write_gains
 from monitor.model.plant import load_plant
 from monitor.service.alarm import AlarmConfig
 from monitor.link.dialect import layout_by_name
-from monitor.service.vehicles import Fleet, VehicleTable, load_fleet, load_model
+from monitor.service.fleet_file import Fleet, load_fleet, load_model
+from monitor.service.vehicles import VehicleTable
 
 
 def _gains_file(path: Path, plant_name: str = "paper-continuous") -> Path:

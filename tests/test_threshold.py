@@ -138,7 +138,7 @@ def test_alarm_threshold_auto_is_the_bound_with_its_margin(fast):
     from types import SimpleNamespace
 
     from monitor.commands.run import AUTO_MARGIN, alarm_from_args
-    from monitor.service.vehicles import Fleet
+    from monitor.service.fleet_file import Fleet
 
     plant, result = fast
     fleet = Fleet(SimpleNamespace(plant=plant, gains=SimpleNamespace(gains=result.gains)))

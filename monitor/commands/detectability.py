@@ -90,7 +90,7 @@ def _check(args: argparse.Namespace) -> None:
 def run(args: argparse.Namespace) -> int:
     from monitor.checks.detectability import FlightPlan, detectability, monte_carlo
     from monitor.model.identification import finite_or_none  # JSON has no infinity (an undetectable bias is inf)
-    from monitor.service.vehicles import load_model
+    from monitor.service.fleet_file import load_model
 
     _check(args)
     model = load_model(args.plant, args.gains, force=False)

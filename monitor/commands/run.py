@@ -30,7 +30,7 @@ def load_models(args: argparse.Namespace, layouts=None):
 
     ``layouts``: where signal maps look their message names up (default: the MAVLink dialect)."""
     from monitor.errors import UserError
-    from monitor.service.vehicles import Fleet, load_fleet, load_model
+    from monitor.service.fleet_file import Fleet, load_fleet, load_model
 
     fleet_file = getattr(args, "fleet", None)
     if (args.plant is None) != (args.gains is None):

@@ -29,7 +29,8 @@ from monitor.link.transports import ConnectionSpec, Link, open_link
 from monitor.service.alarm import AlarmConfig
 from monitor.service.pipeline import Pipeline
 from monitor.service.records import TruthRecord
-from monitor.service.vehicles import Fleet, VehicleTable
+from monitor.service.fleet_file import Fleet
+from monitor.service.vehicles import VehicleTable
 
 __all__ = ["MonitorConfig", "build_pipeline", "run_daemon", "default_name"]
 

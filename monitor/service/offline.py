@@ -22,7 +22,8 @@ from monitor.link.tlog import TlogStats, read_tlog
 from monitor.service.alarm import AlarmConfig
 from monitor.service.pipeline import Pipeline
 from monitor.service.records import SampleRecord
-from monitor.service.vehicles import Fleet, VehicleTable
+from monitor.service.fleet_file import Fleet
+from monitor.service.vehicles import VehicleTable
 
 __all__ = ["LogAnalysis", "analyse_log", "analyse_dataflash"]
 
