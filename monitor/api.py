@@ -32,10 +32,10 @@ from typing import Any, Sequence
 import numpy as np
 
 from monitor.model.closed_loop import Gains
-from monitor.demo.montecarlo import Trace
 from monitor.design.result import DesignResult
 from monitor.errors import UserError
 from monitor.model.plant import Plant, load_plant, plant_from_table
+from monitor.model.simulate import Trace
 from monitor.checks.verify import Verdict
 
 __all__ = ["Gains", "Plant", "DesignResult", "Verdict", "SimulatedRun", "load_plant", "plant_from_arrays",
@@ -176,15 +176,21 @@ def simulate(plant: Plant, gains: Gains, steps: int = 100, fault: str = "bias:2@
     """
     from contextlib import nullcontext
 
-    from monitor.demo.montecarlo import run_scenario
+    from monitor.demo.montecarlo import score_run
     from monitor.demo.sim_recording import simulated_recording
+    from monitor.model.simulate import simulate as simulate_loop
+    from monitor.wire.specs import parse_delay_spec, parse_fault_spec, parse_wind_spec
 
     delay_spec = delay or f"uniform:{plant.tau_min}:{plant.tau_max}"
     scenario = f"fault {fault}, delay {delay_spec}, wind {wind}, seed {seed}, {steps} samples"
     recording = (simulated_recording(rrd, plant, gains, "given to simulate", scenario)
                  if rrd is not None else nullcontext(None))
     with recording as on_sample:
-        trace, sc = run_scenario(plant, gains, steps, fault, delay_spec, wind, seed, on_sample)
+        schedule = parse_fault_spec(fault)
+        wind_values = parse_wind_spec(wind, plant.h, seed).values()
+        trace = simulate_loop(plant, gains, steps, schedule, parse_delay_spec(delay_spec, seed), wind_values,
+                              on_sample)
+    sc = score_run(trace, schedule)
     return SimulatedRun(**{f.name: getattr(trace, f.name) for f in fields(Trace)}, settling_steps=sc.settling_steps,
                         rms_ef=sc.rms_ef, peak_alpha_after=sc.peak_alpha_after)
 

@@ -34,10 +34,9 @@ from monitor.config_file import apply_config_file  # the one reader of --config 
 from monitor.errors import UserError
 from monitor.wire import TURBULENCE_LEVELS
 from monitor.model.plant import Plant, load_plant
-from monitor.wire.specs import DelaySampler, FaultSchedule, parse_delay_spec, parse_fault_spec
-from sim_vehicle.excitation import Excitation, parse_excite_spec
+from monitor.wire.specs import (DelaySampler, Excitation, FaultSchedule, Wind, parse_delay_spec, parse_excite_spec,
+                                parse_fault_spec, parse_wind_spec)
 from sim_vehicle.network import Impairment
-from sim_vehicle.wind import Wind, parse_wind_spec
 
 __all__ = ["Settings", "apply_config_file", "settings_from_args", "parse_udpout", "parse_hostport"]
 

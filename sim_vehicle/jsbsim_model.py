@@ -53,19 +53,16 @@ from typing import Callable, Iterator, Sequence
 import numpy as np
 
 from monitor.errors import UserError
+from monitor.wire import TURBULENCE_INTENSITY  # (windspeed at 20 ft AGL, PoE curve) per level: JSBSim's table
 from sim_vehicle.flight_model import FlightModelError, Outputs
 
-__all__ = ["AircraftSpec", "JSBSimFlightModel", "TURBULENCE", "DEFAULT_DT", "jsbsim_seed", "step_size"]
+__all__ = ["AircraftSpec", "JSBSimFlightModel", "DEFAULT_DT", "jsbsim_seed", "step_size"]
 
 log = logging.getLogger(__name__)
 
 DEFAULT_DT = 1.0 / 120.0
 KT_TO_M_S = 1852.0 / 3600.0
 FT_TO_M = 0.3048
-# (windspeed at 20 ft AGL in ft/s, probability-of-exceedance curve): JSBSim's own table (FGWinds.h)
-TURBULENCE: dict[str, tuple[float, int] | None] = {
-    "none": None, "light": (25.0, 3), "moderate": (50.0, 4), "severe": (75.0, 6),
-}
 MILSPEC = 3  # atmosphere/turb-type: ttMilspec (Dryden spectrum, MIL-F-8785C)
 _PROBE = np.linspace(-1.0, 1.0, 81)  # commands probed for the elevator's scaling (0 and the ends included)
 _LCG_MODULUS = 2**31 - 1
@@ -311,7 +308,7 @@ class JSBSimFlightModel:
         return deg, commands[first]
 
     def _set_turbulence(self, level: str) -> None:
-        setting = TURBULENCE[level]
+        setting = TURBULENCE_INTENSITY[level]
         if setting is None:
             self.fdm["atmosphere/turb-type"] = 0
             return

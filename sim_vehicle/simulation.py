@@ -53,13 +53,11 @@ import numpy as np
 
 from monitor.model.plant import Plant
 from monitor.wire.telemetry import AircraftSample, Sample
-from monitor.wire.specs import DelaySampler, FaultSchedule, parse_delay_spec
+from monitor.wire.specs import DelaySampler, Excitation, FaultSchedule, Wind, parse_delay_spec
 from sim_vehicle.dynamics import Airframe, LinearFlightModel
-from sim_vehicle.excitation import Excitation
 from sim_vehicle.flight_model import FlightModel, Outputs
 from sim_vehicle.network import DOWNLINK, UPLINK, Impairment
 from sim_vehicle.stats import RunStats
-from sim_vehicle.wind import Wind
 
 __all__ = ["Sink", "Simulation", "SampleTruth"]
 

@@ -20,15 +20,15 @@ from monitor.demo.report import Row, format_table
 from monitor.demo.steady import held_output_steady_state, q_caption
 from monitor.design.result import DesignResult
 from monitor.errors import DesignFailed, UserError, run_cli_command
+from monitor.model import simulate as loop
 from monitor.model.plant import Plant, load_plant
-from monitor.wire.specs import parse_delay_spec, parse_fault_spec
-from sim_vehicle.wind import parse_wind_spec
+from monitor.wire.specs import parse_delay_spec, parse_fault_spec, parse_wind_spec
 from tests.designs import designed
 
 
-def _run(plant, gains, seed: int) -> montecarlo.Trace:
-    return montecarlo.simulate(plant, gains, 100, parse_fault_spec("bias:2@20"), parse_delay_spec("uniform:0:0.46", seed),
-                               parse_wind_spec("paper", plant.h, seed).values())
+def _run(plant, gains, seed: int) -> loop.Trace:
+    return loop.simulate(plant, gains, 100, parse_fault_spec("bias:2@20"), parse_delay_spec("uniform:0:0.46", seed),
+                         parse_wind_spec("paper", plant.h, seed).values())
 
 
 def test_monte_carlo_clips_the_elevator_as_the_live_vehicle_does():
@@ -40,7 +40,7 @@ def test_monte_carlo_clips_the_elevator_as_the_live_vehicle_does():
         assert np.max(np.abs(trace.alpha)) < 30.0  # bounded, comparable to the live run (12-15 deg), not 8e11
     free = dataclasses.replace(plant, actuator=dataclasses.replace(plant.actuator, limit=None))
     assert np.max(np.abs(_run(free, result.gains, 0).alpha)) > 1e6  # what an unlimited elevator would claim
-    assert montecarlo.actuator(plant, np.array([45.0]))[0] == 30.0
+    assert loop.actuator(plant, np.array([45.0]))[0] == 30.0
 
 
 def test_monte_carlo_refuses_an_actuator_it_does_not_model():

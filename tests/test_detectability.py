@@ -24,7 +24,7 @@ def _paper():
 
 def _fly_linear(plant, gains, steps: int, delay: str, wind, fault: str | None = None, alarm=None, seed: int = 0):
     """The vehicle's exact simulation of the continuous plant, the monitor's estimator answering at once."""
-    from monitor.checks.detectability import ClosedLoop
+    from monitor.jsbsim_flights import ClosedLoop
     from monitor.model.estimator import Estimator
     from monitor.wire.specs import parse_delay_spec, parse_fault_spec
     from sim_vehicle.simulation import Simulation
@@ -39,7 +39,7 @@ def test_fhat_std_correlation_and_crossings_match_a_long_simulation_of_the_loop(
     """Independent code: sim_vehicle integrates the continuous plant with its own Gauss-Markov gusts, the
     monitor's Estimator closes the loop; the Lyapunov std and Rice's rate come from closed_loop's matrices."""
     from monitor.checks.detectability import fhat_noise, upcrossing_rate
-    from sim_vehicle.wind import Wind
+    from monitor.wire.specs import Wind
 
     plant, result = _paper()
     noise, _ = fhat_noise(plant, result.gains, SIGMA, TAU_D, per_hour=1.0)

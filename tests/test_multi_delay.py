@@ -140,7 +140,7 @@ LONG_DELAY_PLANT = str(Path(__file__).parents[1] / "docs" / "examples" / "paper-
 def test_a_certified_loop_holds_with_every_command_one_to_two_and_a_half_samples_late():
     """uniform:1:2.4 at h = 1 s: no command ever acts in its own interval. The design's certificate is checked
     by verify; the estimate on the vehicle's exact simulation settles within 5 % and stays there."""
-    from monitor.checks.detectability import ClosedLoop
+    from monitor.jsbsim_flights import ClosedLoop
     from monitor.checks.verify import verify_gains
     from monitor.model.estimator import Estimator
     from monitor.wire.specs import parse_delay_spec, parse_fault_spec

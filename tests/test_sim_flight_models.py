@@ -12,16 +12,15 @@ from monitor.config_file import parse_args_with_config
 from monitor.errors import UserError
 from monitor.model.plant import load_plant
 from monitor.wire.mavlink import new_codec, sample_index
-from monitor.wire.specs import parse_delay_spec, parse_fault_spec
+from monitor.wire.specs import Excitation, parse_delay_spec, parse_excite_spec, parse_fault_spec
 from sim_vehicle.cli import build_parser
 from sim_vehicle.config import settings_from_args
 from sim_vehicle.dynamics import Airframe, LinearFlightModel
-from sim_vehicle.excitation import Excitation, parse_excite_spec
 from sim_vehicle.flight_model import FlightModel
 from sim_vehicle.jsbsim_model import AircraftSpec, JSBSimFlightModel
 from sim_vehicle.simulation import Simulation
 from monitor.wire.telemetry import AircraftSample, encode_sample
-from tests.test_sim_simulation import Recorder
+from tests.sim_recorder import Recorder
 
 PLANT = load_plant("paper-continuous")
 CONTRACT_KEYS = {"sysid", "k", "t", "x", "f", "d", "tau"}

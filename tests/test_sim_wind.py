@@ -1,4 +1,4 @@
-"""Wind models (sim_vehicle/wind.py): the paper's oscillator exactly, seeded turbulence statistically."""
+"""The wind SPEC (monitor/wire/specs.py): the paper's oscillator exactly, seeded turbulence statistically."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from monitor.errors import UserError
-from sim_vehicle.wind import PAPER_ROTATION, parse_wind_spec
+from monitor.wire.specs import PAPER_ROTATION, parse_wind_spec
 
 
 def test_paper_oscillator_is_the_published_recursion():

@@ -88,7 +88,7 @@ def _check(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from monitor.checks.detectability import FlightPlan, detectability, monte_carlo
+    from monitor.checks.detectability import detectability
     from monitor.model.identification import finite_or_none  # JSON has no infinity (an undetectable bias is inf)
     from monitor.service.fleet_file import load_model
 
@@ -102,6 +102,8 @@ def run(args: argparse.Namespace) -> int:
                            report_time_constant=getattr(model.gains, "fault_time_constant", None))
     mc = None
     if args.monte_carlo:
+        from monitor.jsbsim_flights import FlightPlan, monte_carlo  # the in-process JSBSim flights (optional)
+
         plan = FlightPlan(args.aircraft, airspeed_kt=args.airspeed, altitude_ft=args.altitude,
                           aircraft_dir=args.aircraft_dir, minutes=args.minutes, seed=args.seed)
         mc = monte_carlo(model, result, args.monte_carlo, plan,

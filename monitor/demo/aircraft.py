@@ -35,7 +35,7 @@ import numpy as np
 from monitor.demo.live import Aircraft, Scenario, Daemon
 from monitor.demo.methods import METHODS
 from monitor.errors import UserError
-from sim_vehicle.excitation import Excitation, parse_excite_spec
+from monitor.wire.specs import Excitation, parse_excite_spec
 
 if TYPE_CHECKING:
     from monitor.pipelines.identify_log import IdentifiedLog

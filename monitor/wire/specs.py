@@ -1,9 +1,11 @@
-"""Parsers for the fault and delay SPECs of the contract: what fault the vehicle suffers, what delay it sees.
+"""Parsers for the fault, delay and wind SPECs of the contract: what fault the vehicle suffers, what delay it
+sees, what wind blows.
 
 Both ``sim-vehicle`` (which applies them) and the monitor's replay/demo code (which scores a run against
-them) import these functions, so the grammar lives in exactly one place. Everything here is pure: no
-clocks, no sockets, and random draws are keyed by ``(seed, k)``, so ``tau(k)`` is the same whichever
-order the samples are asked for in.
+them, and simulates one: ``monitor.model.simulate``) import these functions, so the grammar, and the seeded
+draws each SPEC stands for, live in exactly one place. Everything here is pure: no clocks, no sockets, and
+random draws are keyed by the seed (``tau(k)`` by ``(seed, k)``, so it is the same whichever order the
+samples are asked for in); the one file read is a ``trace:FILE`` delay SPEC's.
 
 Fault SPEC (plant units, sample index ``k``; several joined by ``+``)::
 
@@ -22,15 +24,36 @@ Delay SPEC (seconds of simulated time, total sensor -> actuator)::
 
     const:0.2   uniform:0:0.46   normal:0.2:0.05 (clipped at 0)   trace:FILE (one value per line, cycled)
 
+Wind SPEC (the plant's disturbance ``d(k)``, held constant over each sample interval so the paper's
+``Dd d(k)`` is exact; several joined by ``+`` add up)::
+
+    paper                   the paper's oscillator: s(k+1) = [[0.9922, 0.1247], [-0.1247, 0.9922]] s(k),
+                            s(0) = [0.01, 0], d(k) = 0.1 s1(k)   (the default)
+    turbulence:SIGMA[:TAU]  seeded first-order Gauss-Markov gusts, standard deviation SIGMA (plant units),
+                            correlation time TAU seconds (default 2): d(k+1) = a d(k) + sqrt(1 - a^2) SIGMA w(k),
+                            a = exp(-h / TAU), d(0) ~ N(0, SIGMA^2)
+    none                    no wind
+
+Why Gauss-Markov: it is the discrete form of the Dryden spectrum's first-order shape, stationary from
+k = 0, and each draw is keyed by ``(seed, k)`` so runs are reproducible.
+
+Excitation SPEC (sim-vehicle's ``--excite``, an identification manoeuvre the vehicle flies on board; the
+aircraft demo hands it over and counts its samples)::
+
+    prbs:AMP:SECONDS        a seeded random binary sequence of trim +- AMP (degrees) for SECONDS
+    none                    no manoeuvre (the empty string too)
+
 Why errors are ``UserError``: a SPEC comes from a command line, so a typo must be one line that quotes it.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -42,6 +65,13 @@ __all__ = [
     "parse_fault_spec",
     "DelaySampler",
     "parse_delay_spec",
+    "Wind",
+    "parse_wind_spec",
+    "PAPER_ROTATION",
+    "Excitation",
+    "parse_excite_spec",
+    "MIN_DWELL_S",
+    "MAX_DWELL_S",
     "FAULT_KINDS",
     "DELAY_KINDS",
 ]
@@ -286,3 +316,125 @@ def _read_trace(name: str, base_dir: str | Path | None, fail) -> tuple[float, ..
     if not values:
         raise fail(f"{path} holds no delay values")
     return tuple(values)
+
+
+PAPER_ROTATION = np.array([[0.9922, 0.1247], [-0.1247, 0.9922]])
+PAPER_S0 = np.array([0.01, 0.0])
+PAPER_GAIN = 0.1
+
+
+@dataclass(frozen=True)
+class Wind:
+    """A sum of wind terms; ``values()`` yields ``d(k)`` as a scalar gust on the plant's first wind input."""
+
+    oscillator: bool = True
+    sigma: float = 0.0
+    tau: float = 2.0
+    h: float = 1.0
+    seed: int = 0
+
+    def series(self, n: int) -> np.ndarray:
+        """``d(0), ..., d(n-1)``: the first ``n`` values of ``values()``."""
+        return np.fromiter(itertools.islice(self.values(), n), dtype=float, count=n)
+
+    def values(self) -> Iterator[float]:
+        """``d(0), d(1), ...`` without end (the daemon may run until a signal)."""
+        s = PAPER_S0.copy()
+        a = math.exp(-self.h / self.tau)
+        rng = np.random.default_rng([self.seed, 0x3D1])
+        gust = rng.normal(0.0, self.sigma) if self.sigma > 0 else 0.0
+        while True:
+            yield (PAPER_GAIN * float(s[0]) if self.oscillator else 0.0) + gust
+            s = PAPER_ROTATION @ s
+            if self.sigma > 0:
+                gust = a * gust + math.sqrt(1 - a * a) * self.sigma * float(rng.normal())
+
+
+def parse_wind_spec(text: str, h: float, seed: int = 0) -> Wind:
+    """Parse a wind SPEC (module docstring); a typo is a one-line ``UserError`` quoting the SPEC."""
+    def fail(why: str) -> UserError:
+        return UserError(f"bad wind SPEC '{text}': {why} (expected paper, none, turbulence:SIGMA[:TAU], joined by '+')")
+
+    oscillator, sigma, tau = False, 0.0, 2.0
+    for term in text.strip().lower().split("+"):
+        kind, _, rest = term.strip().partition(":")
+        if kind == "none" and not rest:
+            continue
+        if kind == "paper" and not rest:
+            oscillator = True
+            continue
+        if kind != "turbulence":
+            raise fail(f"unknown term '{term}'")
+        try:
+            numbers = [float(v) for v in rest.split(":")] if rest else []
+        except ValueError:
+            raise fail(f"'{rest}' are not numbers") from None
+        if not 1 <= len(numbers) <= 2 or not all(math.isfinite(v) and v > 0 for v in numbers):
+            raise fail("turbulence takes SIGMA > 0 and optionally TAU > 0")
+        sigma = numbers[0]
+        tau = numbers[1] if len(numbers) == 2 else tau
+    return Wind(oscillator=oscillator, sigma=sigma, tau=tau, h=h, seed=seed)
+
+
+MIN_DWELL_S = 0.2
+MAX_DWELL_S = 0.8
+
+
+@dataclass(frozen=True)
+class Excitation:
+    """A PRBS of +-``amplitude`` about trim for ``seconds`` of simulated time (``--excite prbs:AMP:SECONDS``).
+
+    As an autopilot's system-identification mode does, the vehicle itself issues the elevator: a seeded random
+    binary sequence of trim +- AMP (plant units, degrees) for the first SECONDS, then the trim deflection once
+    (the manoeuvre ends where it started), and from then on it holds trim or follows commands from outside.
+
+    The dwell (the time between two switches) is drawn uniformly from [0.2 s, 0.8 s], whole samples, at least
+    one sample. Why: a switch every 0.2-0.8 s (mean 0.5 s) puts the sequence's power flat from DC to about
+    1/(pi * 0.5 s) = 0.6 Hz, falling off above: it covers the short period (c172p at 100 kt: a 1-2 Hz mode that
+    settles in ~0.6 s) and, for runs of a few minutes, the phugoid (~25 s period) too; a fixed-clock PRBS would
+    have to pick one bit length for both. The draws come from ``(seed, "excite")`` only, so the same seed gives
+    the same manoeuvre whatever the link does.
+
+    Each level is issued at its sample k and applied after the drawn delay tau(k), like ``--autopilot``'s
+    commands, and the sample's ACTUATOR_OUTPUT_STATUS reports the deflection issued (the contract's observe-only
+    meaning), so a tlog of the run holds input and output side by side for ``fault-monitor analyse``.
+    """
+
+    amplitude: float
+    seconds: float
+
+    def samples(self, h: float) -> int:
+        """How many samples carry a PRBS level (the next one returns to trim)."""
+        return max(1, int(round(self.seconds / h)))
+
+    def signs(self, h: float, seed: int) -> list[int]:
+        """+1/-1 per sample for ``samples(h)`` samples: seeded random switching with dwell in [0.2, 0.8] s."""
+        n = self.samples(h)
+        rng = np.random.default_rng([seed, 0xE7C1])
+        shortest = max(1, int(math.ceil(MIN_DWELL_S / h - 1e-9)))
+        longest = max(shortest, int(math.floor(MAX_DWELL_S / h + 1e-9)))
+        sign = 1 if rng.random() < 0.5 else -1
+        out: list[int] = []
+        while len(out) < n:
+            out.extend([sign] * int(rng.integers(shortest, longest + 1)))
+            sign = -sign
+        return out[:n]
+
+    def __str__(self) -> str:
+        return f"prbs:{self.amplitude:g}:{self.seconds:g}"
+
+
+def parse_excite_spec(text: str | None) -> Excitation | None:
+    """``prbs:AMP:SECONDS`` (AMP degrees > 0, SECONDS > 0) -> ``Excitation``; None or "none" -> None."""
+    if text is None or str(text).strip().lower() in ("", "none"):
+        return None
+    kind, _, rest = str(text).strip().lower().partition(":")
+    parts = rest.split(":")
+    try:
+        numbers = [float(v) for v in parts]
+    except ValueError:
+        numbers = []
+    if kind != "prbs" or len(numbers) != 2 or not all(math.isfinite(v) and v > 0 for v in numbers):
+        raise UserError(f"bad --excite SPEC '{text}': expected prbs:AMP:SECONDS with AMP (deg) and SECONDS > 0, "
+                        "e.g. prbs:1:60")
+    return Excitation(amplitude=numbers[0], seconds=numbers[1])
