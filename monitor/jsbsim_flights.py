@@ -32,39 +32,34 @@ import numpy as np
 from monitor.checks.detectability import Detectability, upcrossing_rate
 from monitor.errors import UserError
 from monitor.model.plant import Plant
+from monitor.wire.telemetry import SAMPLE_FIELDS, Sample, quantities
 
 __all__ = ["ClosedLoop", "sample_values", "MonteCarlo", "FlightPlan", "monte_carlo"]
 
 
-# what the vehicle's encoder (monitor.wire.telemetry.encode_sample) puts in each MAVLink field, in that field's own
-# unit (before a signal's scale)
-_FIELDS: dict[tuple[str, str, int], Callable] = {
-    ("AOA_SSA", "AOA", 0): lambda s: s.alpha_deg,
-    ("ATTITUDE", "pitchspeed", 0): lambda s: math.radians(s.q_deg_s),
-    ("ATTITUDE", "pitch", 0): lambda s: math.radians(getattr(s, "theta_deg", 0.0)),
-    ("ATTITUDE", "roll", 0): lambda s: s.attitude[0],
-    ("ATTITUDE", "yaw", 0): lambda s: s.attitude[1],
-    ("ATTITUDE", "rollspeed", 0): lambda s: s.attitude[2],
-    ("ATTITUDE", "yawspeed", 0): lambda s: s.attitude[3],
-    ("VFR_HUD", "airspeed", 0): lambda s: s.airspeed_m_s,
-    ("VFR_HUD", "groundspeed", 0): lambda s: s.hud[0],
-    ("VFR_HUD", "alt", 0): lambda s: s.hud[3],
-    ("VFR_HUD", "climb", 0): lambda s: s.hud[4],
-    ("ACTUATOR_OUTPUT_STATUS", "actuator", 0): lambda s: s.elevator_deg,
-}
-
-
 def sample_values(signals) -> Callable:
-    """A function sample -> ``{name: value}`` for the signals the estimator uses, as the link would decode them."""
+    """A function sample -> ``{name: value}`` for the signals the estimator uses, as the link would decode them.
+
+    Read from the sample's definition (``monitor.wire.telemetry``): each signal's field is looked up among the
+    fields the vehicle's encoder fills, its wire value is the quantity over the field's scale, and the signal's
+    own scale and offset apply as the link applies them. A map naming a field the vehicle does not send is a
+    one-line error.
+    """
+    fields = {(f.message, f.field, f.index or 0): f for f in SAMPLE_FIELDS}
     readers = []
     for name in (*signals.outputs, *signals.actuator):
         sig = signals.measured[name]
-        read = _FIELDS.get((sig.message, sig.field, sig.index))
-        if read is None:
+        field = fields.get((sig.message, sig.field, sig.index))
+        if field is None:
             raise UserError(f"the in-process flight cannot produce signal '{name}' ({sig.message}.{sig.field}"
                             f"[{sig.index}]): it knows what sim-vehicle sends")
-        readers.append((name, read, sig.scale, sig.offset))
-    return lambda sample: {name: scale * read(sample) + offset for name, read, scale, offset in readers}
+        readers.append((name, field.name, sig.scale / field.scale, sig.offset))
+
+    def read(sample: Sample) -> dict[str, float]:
+        have = quantities(sample)
+        return {name: scale * have.get(quantity, 0.0) + offset for name, quantity, scale, offset in readers}
+
+    return read
 
 
 class ClosedLoop:
