@@ -1,6 +1,6 @@
 """Benchmark of ``fault-monitor identify`` on a 60-s and a 10-min flight log (run by hand; prints figures).
 
-Each flight is the c172p of ``tests/test_identify.py``, flown by JSBSim at 120 Hz with an elevator PRBS of
+Each flight is the c172p of ``tests/c172p_flights.py``, flown by JSBSim at 120 Hz with an elevator PRBS of
 +-1 deg (after 5 s of trim) and logged at 20 Hz the way MAVProxy logs (one MAVLink 2 frame per record: ATTITUDE,
 AOA_SSA, VFR_HUD, ACTUATOR_OUTPUT_STATUS, a HEARTBEAT a second). It times the whole command
 (``python -m monitor identify``, imports included) and, in process, the log reading and the maths separately.
@@ -22,7 +22,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from tests.test_identify import fly, write_tlog
+from tests.c172p_flights import fly, write_tlog
 
 
 def in_process(log: Path) -> tuple[float, float, int]:

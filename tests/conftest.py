@@ -60,3 +60,28 @@ def shared_design_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
     folder = shared / "designs"
     folder.mkdir(exist_ok=True)
     os.environ[CACHE_ENV] = str(folder)
+
+
+# -- gains files shared by many modules (fixtures live here, never imported from a test module) -----------------
+
+
+@pytest.fixture(scope="session")
+def gains_file(tmp_path_factory) -> Path:
+    """The default certified design for paper-continuous (what `fault-monitor design` writes), once per session
+    (the design itself once for both workers: ``tests/designs.py``)."""
+    from monitor.gains import write_gains
+    from tests.designs import designed
+
+    plant, result = designed("paper-continuous", "certified")
+    path = tmp_path_factory.mktemp("gains") / "certified.toml"
+    write_gains(path, result, plant)
+    return path
+
+
+@pytest.fixture(scope="module")
+def gains_path(tmp_path_factory) -> Path:
+    """Hand-made gains for paper-continuous, once per module (``tests/gains_files.py``: no design, for tests whose
+    logic does not depend on the design); not the certified ``gains_file``."""
+    from tests.gains_files import hand_made_gains_file
+
+    return hand_made_gains_file(tmp_path_factory.mktemp("g") / "gains.toml")

@@ -19,21 +19,12 @@ import numpy as np
 import pytest
 
 from monitor.cli import main
+from tests.dataflash_formats import FORMATS
 
 HEAD = b"\xa3\x95"
 _STRUCT = {"B": "B", "H": "H", "I": "I", "Q": "Q", "f": "f", "c": "h", "C": "H", "h": "h", "n": "4s", "N": "16s",
            "Z": "64s"}
 _MULT = {"c": 100.0, "C": 100.0}  # stored as hundredths: DFReader divides by 100
-# ArduPlane's messages (names and columns as AP_Logger writes them; ATT in centidegrees as in ArduPilot 4.x)
-FORMATS = {
-    "ATT": (129, "QccccCCCC", "TimeUS,DesRoll,Roll,DesPitch,Pitch,DesYaw,Yaw,ErrRP,ErrYaw"),
-    "RATE": (130, "Qffffffffffff", "TimeUS,RDes,R,ROut,PDes,P,POut,YDes,Y,YOut,ADes,A,AOut"),
-    "AOA": (131, "Qff", "TimeUS,AOA,SSA"),
-    "RCOU": (132, "QHHHHHHHHHHHHHH", "TimeUS,C1,C2,C3,C4,C5,C6,C7,C8,C9,C10,C11,C12,C13,C14"),
-    "ARSP": (133, "QBfff", "TimeUS,I,Airspeed,DiffPress,Temp"),
-    "PARM": (134, "QNf", "TimeUS,Name,Value"),
-    "CTUN": (135, "Qccccf", "TimeUS,NavRoll,Roll,NavPitch,Pitch,As"),  # declared, never written
-}
 ARDUPLANE_MAP = """
 [signals]
 instant = "RCOU"                  # the servo outputs' TimeUS is the sample's instant
@@ -181,7 +172,7 @@ def test_analyse_gives_the_same_estimates_from_a_dataflash_log_and_a_tlog(tmp_pa
     tlog (AOA_SSA, SERVO_OUTPUT_RAW), the same float32 and PWM values at the same TimeUS: same samples, same f_hat."""
     from monitor.model.plant import load_plant
     from monitor.wire.mavlink import mavlink, new_codec
-    from tests.test_service_vehicles import _gains_file
+    from tests.gains_files import hand_made_gains_file
 
     plant = load_plant("paper-continuous")
     x, u_prev, rows = np.zeros(2), 0.0, []
@@ -219,7 +210,7 @@ def test_analyse_gives_the_same_estimates_from_a_dataflash_log_and_a_tlog(tmp_pa
         '[signals]\ninstant = "SERVO_OUTPUT_RAW"\noutputs = ["alpha"]\nactuator = ["elevator"]\n[signals.measured]\n'
         'alpha = { field = "AOA_SSA.AOA", unit = "deg" }\n'
         'elevator = { field = "SERVO_OUTPUT_RAW.servo2_raw", scale = 0.06, offset = -90.0, unit = "deg" }\n')
-    gains = _gains_file(tmp_path / "gains.toml")
+    gains = hand_made_gains_file(tmp_path / "gains.toml")
     from monitor.link.dataflash import open_dataflash
     from monitor.service.alarm import AlarmConfig
     from monitor.service.offline import analyse_dataflash, analyse_log
@@ -259,9 +250,9 @@ def test_analyse_gives_the_same_estimates_from_a_dataflash_log_and_a_tlog(tmp_pa
     (["identify", "{bin}", "--out", "{work}/p.toml", "--signals", "{map}", "--sysid", "0"], "--sysid must be"),
 ])
 def test_dataflash_mistakes_are_one_line_exit_2(flight, tmp_path: Path, capsys, argv, message) -> None:
-    from tests.test_service_vehicles import _gains_file
+    from tests.gains_files import hand_made_gains_file
 
-    gains = _gains_file(tmp_path / "gains.toml")
+    gains = hand_made_gains_file(tmp_path / "gains.toml")
     (tmp_path / "mav.toml").write_text('[signals]\ninstant = "AOA_SSA"\noutputs = ["alpha"]\nactuator = ["e"]\n'
                                        '[signals.measured]\nalpha = { field = "AOA_SSA.AOA" }\n'
                                        'e = { field = "RCOU.C2" }\n')

@@ -17,14 +17,14 @@ from monitor.service.pipeline import Pipeline
 from monitor.service.fleet_file import Fleet, load_model
 from monitor.service.vehicles import VehicleTable
 from monitor.wire.mavlink import mavlink, new_codec
-from tests.test_service_vehicles import _gains_file
+from tests.gains_files import hand_made_gains_file
 
 AOA, ACT = layout_by_name("AOA_SSA"), layout_by_name("ACTUATOR_OUTPUT_STATUS")
 
 
 @pytest.fixture(scope="module")
 def model(tmp_path_factory):
-    return load_model("paper-continuous", _gains_file(tmp_path_factory.mktemp("g") / "gains.toml"))
+    return load_model("paper-continuous", hand_made_gains_file(tmp_path_factory.mktemp("g") / "gains.toml"))
 
 
 def aoa(k: int, alpha: float = 0.1) -> tuple:

@@ -10,6 +10,7 @@ import pytest
 
 from monitor.errors import UserError
 from monitor.link.transports import ConnectionSpec, parse_connection, resolve
+from tests.mavlink1_signals import V1_SIGNALS
 
 
 @pytest.mark.parametrize("text, spec", [
@@ -36,9 +37,9 @@ def test_an_unresolvable_host_is_one_line() -> None:
 
 
 def test_mavlink_port_in_use_is_one_line_exit_2(tmp_path) -> None:
-    from tests.test_service_vehicles import _gains_file
+    from tests.gains_files import hand_made_gains_file
 
-    gains = _gains_file(tmp_path / "gains.toml")
+    gains = hand_made_gains_file(tmp_path / "gains.toml")
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
         taken.bind(("127.0.0.1", 0))
         port = taken.getsockname()[1]
@@ -76,9 +77,9 @@ def test_zenoh_errors_lose_their_rust_source_paths() -> None:
 
 
 def test_operator_mistakes_on_run_are_one_line_exit_2(tmp_path) -> None:
-    from tests.test_service_vehicles import _gains_file
+    from tests.gains_files import hand_made_gains_file
 
-    gains = _gains_file(tmp_path / "gains.toml")
+    gains = hand_made_gains_file(tmp_path / "gains.toml")
     fleet = tmp_path / "fleet.toml"
     fleet.write_text("vehicle = 3\n")
     cases = [(["--queue", "0"], "--queue must be at least 1"),
@@ -105,17 +106,6 @@ def test_a_closed_stdout_pipe_is_a_quiet_exit(tmp_path) -> None:
     assert proc.stdout.strip() == b"2"
 
 
-V1_SIGNALS = """
-[signals]
-instant = "SERVO_OUTPUT_RAW"
-outputs = ["alpha"]
-actuator = ["elevator"]
-[signals.measured]
-alpha = { field = "ATTITUDE.pitch", scale = 57.29577951308232, unit = "deg" }
-elevator = { field = "SERVO_OUTPUT_RAW.servo2_raw", scale = 0.06, offset = -90.0, unit = "deg" }
-"""
-
-
 def _v1_sample(codec, v1, k: int) -> bytes:
     """One sample from a vehicle that speaks MAVLink 1 (ids below 256 only), as one datagram."""
     t_us = k * 1_000_000
@@ -138,10 +128,10 @@ def test_a_mavlink1_peer_is_answered_in_mavlink1_and_a_signed_link_refuses_it(tm
     from monitor.service.fleet_file import Fleet, load_model
     from monitor.service.vehicles import VehicleTable
     from monitor.wire.mavlink import mavlink, new_codec
-    from tests.test_service_vehicles import _gains_file
+    from tests.gains_files import hand_made_gains_file
 
     (tmp_path / "signals.toml").write_text(V1_SIGNALS)
-    model = load_model("paper-continuous", _gains_file(tmp_path / "gains.toml"), signals_file=tmp_path / "signals.toml")
+    model = load_model("paper-continuous", hand_made_gains_file(tmp_path / "gains.toml"), signals_file=tmp_path / "signals.toml")
     pipeline = Pipeline(VehicleTable(Fleet(model), AlarmConfig()))
     link = open_link(parse_connection("udpin:127.0.0.1:0"), 0, pipeline.on_frames, pipeline.frames,
                      Signer(bytes(range(32))) if signed else None)

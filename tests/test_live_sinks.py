@@ -15,7 +15,7 @@ import pytest
 from monitor.errors import UserError
 from monitor.service.live_sinks import LiveSink, find_viewer, parse_viewer_url
 from tests.daemons import free_tcp_port, wait_for
-from tests.test_recorder import make_run
+from tests.recordings import make_run
 
 
 def _sink(port: int, **kwargs: object) -> LiveSink:
@@ -61,7 +61,7 @@ def test_nobody_listening_keeps_the_newest_samples_and_warns_once(caplog: pytest
 
 
 def test_a_viewer_started_late_gets_the_kept_samples(tmp_path: Path) -> None:
-    from tests.e2e.test_live_viewer import _load_when_complete, headless_viewer
+    from tests.rerun_viewer import headless_viewer, load_when_complete
 
     port, out = free_tcp_port(), tmp_path / "late.rrd"
     samples, _ = make_run(1, n=80)
@@ -74,7 +74,7 @@ def test_a_viewer_started_late_gets_the_kept_samples(tmp_path: Path) -> None:
             wait_for(lambda: sink.stats["written"] == 50, 5, what="the kept samples sent")
             sink.close()
             sink.join(5.0)
-            got = _load_when_complete(out, 50)
+            got = load_when_complete(out, 50)
     finally:
         sink.close()
     assert [s.k for s in got.vehicles[1].samples] == list(range(30, 80))
@@ -107,11 +107,11 @@ def test_a_spawned_viewer_is_waited_for_and_reused(tmp_path: Path) -> None:
     import signal
 
     from monitor.service.live_sinks import spawn_viewer, viewer_answers
-    from tests.e2e.test_live_viewer import _viewer_binary
+    from tests.rerun_viewer import viewer_binary
 
     port, pid_file = free_tcp_port(), tmp_path / "viewer.pid"
     script = tmp_path / "rerun"
-    script.write_text(f'#!/bin/sh\necho $$ >> "{pid_file}"\nexec "{_viewer_binary()}" "$@" --save "{tmp_path}/s.rrd"\n')
+    script.write_text(f'#!/bin/sh\necho $$ >> "{pid_file}"\nexec "{viewer_binary()}" "$@" --save "{tmp_path}/s.rrd"\n')
     script.chmod(0o755)
     try:
         url = spawn_viewer(str(script), port)

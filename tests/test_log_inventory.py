@@ -18,7 +18,7 @@ from monitor.cli import main
 from monitor.link.log_inventory import explain_missing, read_inventory
 from monitor.link.signals import default_signal_map
 from monitor.wire.mavlink import mavlink, new_codec
-from tests.test_link_transports import V1_SIGNALS
+from tests.mavlink1_signals import V1_SIGNALS
 
 V1_MAP = V1_SIGNALS  # one map of a MAVLink 1 log's own messages for both test modules
 T0_US = 1_700_000_000_000_000
@@ -76,9 +76,9 @@ def test_the_inventory_counts_versions_messages_rates_and_sysids(tmp_path: Path)
 
 
 def test_analyse_says_what_a_mavlink1_log_holds_and_reads_it_with_its_own_messages(tmp_path: Path, capsys) -> None:
-    from tests.test_service_vehicles import _gains_file
+    from tests.gains_files import hand_made_gains_file
 
-    gains = _gains_file(tmp_path / "gains.toml")
+    gains = hand_made_gains_file(tmp_path / "gains.toml")
     log = tmp_path / "copter32.tlog"
     write_v1_log(log, seconds=40)
     code = main(["analyse", str(log), "--plant", "paper-continuous", "--gains", str(gains)])

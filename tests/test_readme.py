@@ -17,9 +17,8 @@ from pathlib import Path
 import pytest
 
 from tests.daemons import wait_for
-from tests.e2e.test_monitor_paper import gains_file  # noqa: F401 (fixture)
+from tests.dataflash_formats import FORMATS
 from tests.readme_blocks import Block, Session, blocks, check_command_parses, group, indented_code_lines
-from tests.test_dataflash import FORMATS
 
 # every group of run blocks and the test that runs it: a group added to the README without a test fails here
 RUN_GROUPS = {

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import os
 import shutil
 import signal
@@ -21,48 +20,7 @@ from monitor.errors import UserError  # noqa: E402
 from monitor.service.recorder import RrdRecorder  # noqa: E402
 from monitor.service.recording_reader import load_recording  # noqa: E402
 from monitor.service.records import SampleRecord, TruthRecord  # noqa: E402
-
-ONSET, SIZE, LAG = 20, 2.0, 5
-
-
-def make_run(sysid: int, n: int = 200, onset: int = ONSET, size: float = SIZE, lag: int = LAG,
-             skip: frozenset[int] = frozenset()) -> tuple[list[SampleRecord], list[TruthRecord]]:
-    """A hand-made run: f steps to ``size`` at ``onset``, f_hat follows ``lag`` steps later, alarm with it.
-
-    Every field differs per sample and per vehicle, so a misplaced row would be caught. Samples in
-    ``skip`` were never received (the truth still has them); odd samples carry no elevator reading and
-    sample 0 no observed delay, to exercise the optional fields.
-    """
-    samples, truth = [], []
-    for k in range(n):
-        f = size if k >= onset else 0.0
-        truth.append(TruthRecord(sysid, k, 0.5 * k, [math.sin(k) + sysid, 0.1 * k], [f], [0.01 * k], 0.02 * (k % 23)))
-        if k in skip:
-            continue
-        f_hat = size if k >= onset + lag else 0.0
-        samples.append(SampleRecord(
-            sysid=sysid, k=k, t=0.5 * k, wall=1.7e9 + 0.5 * k + 0.001 * sysid,
-            y=[0.1 * k + sysid, -0.2 * k], alpha=math.sin(k / 7) * sysid, q=math.cos(k / 5),
-            elevator=None if k % 2 else 0.3 * k, x_hat=[0.01 * k, 0.02 * k + sysid], f_hat=[f_hat],
-            u=[-0.05 * k], residual=[1e-3 * k, -1e-3 * k], tau_obs=None if k == 0 else 0.01 * (k % 40),
-            processing_s=1e-5 * (1 + k % 9), alarm=k >= onset + 3,
-        ))
-    return samples, truth
-
-
-def write_run(path: Path, sysids: tuple[int, ...] = (1, 2), n: int = 200, truth: bool = True,
-              **run: object) -> dict[int, tuple[list[SampleRecord], list[TruthRecord]]]:
-    """Record ``make_run`` for each vehicle, interleaved as a live loop would, and close the file."""
-    runs = {s: make_run(s, n, **run) for s in sysids}
-    with RrdRecorder(path, properties={"plant": "paper", "plant_hash": "abc123", "gains_L": "[[1.87], [1.63]]"}) as rec:
-        for i in range(n):
-            for s in sysids:
-                samples, truths = runs[s]
-                if i < len(samples):
-                    rec.submit(samples[i])
-                if truth:
-                    rec.submit_truth(truths[i])
-    return runs
+from tests.recordings import make_run, write_run  # noqa: E402
 
 
 def assert_same(got: SampleRecord | TruthRecord, want: SampleRecord | TruthRecord) -> None:
@@ -136,7 +94,7 @@ def test_unwritable_path_is_a_user_error(tmp_path: Path) -> None:
 CHILD = textwrap.dedent("""
     import os, signal, sys, time
     from monitor.service.recorder import RrdRecorder
-    from tests.test_recorder import make_run
+    from tests.recordings import make_run
 
     rec = RrdRecorder(sys.argv[1])
     samples, truth = make_run(7, n=100_000)

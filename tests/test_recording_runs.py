@@ -66,10 +66,10 @@ def test_a_full_disk_is_an_error_while_running_not_only_at_close(tiny_disk: Path
 
 def test_the_daemon_reports_a_failing_recording_in_its_status_and_exit_code(tiny_disk: Path, tmp_path: Path) -> None:
     from tests.daemons import free_udp_port, wait_for
-    from tests.e2e.test_monitor_paper import monitor_daemon, sim_daemon, zenoh_bus
-    from tests.test_service_vehicles import _gains_file
+    from tests.gains_files import hand_made_gains_file
+    from tests.monitor_bus import monitor_daemon, sim_daemon, zenoh_bus
 
-    gains = _gains_file(tmp_path / "gains.toml")
+    gains = hand_made_gains_file(tmp_path / "gains.toml")
     port = free_udp_port()
     with zenoh_bus() as bus:
         with monitor_daemon(tmp_path, gains, port, bus, "fulldisk", "--rrd", str(tiny_disk / "run.rrd")) as monitor:

@@ -11,7 +11,7 @@ import pytest
 os.environ.setdefault("RERUN_ANALYTICS", "0")
 
 from monitor.cli import main  # noqa: E402
-from tests.test_recorder import LAG, ONSET, SIZE, write_run  # noqa: E402
+from tests.recordings import LAG, ONSET, SIZE, write_run  # noqa: E402
 
 CONTRACT_KEYS = {"samples", "settling_steps", "rms_ef", "peak_alpha"}
 

@@ -13,7 +13,7 @@ from monitor.link.dialect import layout_by_name
 from monitor.service.alarm import AlarmConfig
 from monitor.service.fleet_file import Fleet, load_model
 from monitor.service.vehicles import VehicleTable
-from tests.test_service_vehicles import feed, gains_path  # noqa: F401 (gains_path is a fixture)
+from tests.vehicle_table import feed
 
 _ATTITUDE = layout_by_name("ATTITUDE")
 RUN = 60  # samples per run; h = 1 s, so k is the vehicle's time in seconds

@@ -4,44 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-from monitor.model.closed_loop import Gains
-from monitor.design.result import DesignResult
 from monitor.errors import UserError
-from monitor.gains import write_gains
-from monitor.model.plant import load_plant
 from monitor.service.alarm import AlarmConfig
-from monitor.link.dialect import layout_by_name
 from monitor.service.fleet_file import Fleet, load_fleet, load_model
 from monitor.service.vehicles import VehicleTable
-
-
-def _gains_file(path: Path, plant_name: str = "paper-continuous") -> Path:
-    """A hand-made stabilising-enough gains file (the table's logic does not depend on the design)."""
-    plant = load_plant(plant_name)
-    gains = Gains(L=np.array([[1.8], [1.6]]), M=np.array([[0.9]]), K1=np.array([[-0.26]]), K2=np.array([[0.1]]),
-                  K3=np.array([[-1.0]]))
-    result = DesignResult(method="test", gains=gains, gamma_e=1.0, gamma_z=1.0,
-                          build_seconds=0.0, solve_seconds=0.0, total_seconds=0.0)
-    write_gains(path, result, plant)
-    return path
-
-
-@pytest.fixture(scope="module")
-def gains_path(tmp_path_factory) -> Path:
-    return _gains_file(tmp_path_factory.mktemp("g") / "gains.toml")
-
-
-_AOA = layout_by_name("AOA_SSA")
-
-
-def feed(table: VehicleTable, sysid: int, k: int, route: str, now: float, alpha: float = 0.1):
-    """One AOA_SSA (all the default map's y needs) for sample k; the processed result or None."""
-    ready = table.message(sysid, "AOA_SSA", _AOA.decode(_AOA.unpacker.pack(k * 1_000_000, alpha, 0.0)), route, now)
-    done = [table.process(v, s, 0.0) for v, s in ready]
-    return done[-1] if done else None
+from tests.vehicle_table import feed
 
 
 def test_plant_hash_mismatch_is_refused_unless_forced(gains_path: Path) -> None:

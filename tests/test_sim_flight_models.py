@@ -20,7 +20,7 @@ from sim_vehicle.flight_model import FlightModel
 from sim_vehicle.jsbsim_model import AircraftSpec, JSBSimFlightModel
 from sim_vehicle.simulation import Simulation
 from monitor.wire.telemetry import AircraftSample, encode_sample
-from tests.test_sim_simulation import Recorder
+from tests.sim_recorder import Recorder
 
 PLANT = load_plant("paper-continuous")
 CONTRACT_KEYS = {"sysid", "k", "t", "x", "f", "d", "tau"}

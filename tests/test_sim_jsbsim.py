@@ -20,7 +20,7 @@ from monitor.wire.specs import Excitation, parse_delay_spec, parse_fault_spec
 from sim_vehicle.jsbsim_model import AircraftSpec, JSBSimFlightModel, jsbsim_seed, step_size
 from sim_vehicle.simulation import Simulation
 from monitor.wire.telemetry import AircraftSample
-from tests.test_sim_simulation import Recorder
+from tests.sim_recorder import Recorder
 
 REPO = Path(__file__).resolve().parent.parent
 KT = 1852.0 / 3600.0

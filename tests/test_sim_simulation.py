@@ -14,24 +14,9 @@ from monitor.model.plant import load_plant
 from monitor.wire.specs import Wind, parse_delay_spec, parse_fault_spec
 from sim_vehicle.network import DOWNLINK, UPLINK, Impairment
 from sim_vehicle.simulation import Simulation
+from tests.sim_recorder import Recorder
 
 PLANT = load_plant("paper-continuous")
-
-
-class Recorder:
-    """The simulation's Sink, keeping what the vehicle sent (shared by the sim_vehicle test modules)."""
-
-    def __init__(self) -> None:
-        self.samples, self.truth, self.heartbeats = [], [], 0
-
-    def send_sample(self, sample) -> None:
-        self.samples.append(sample)
-
-    def send_heartbeat(self) -> None:
-        self.heartbeats += 1
-
-    def publish_truth(self, payload) -> None:
-        self.truth.append(payload)
 
 
 def fly(sim: Simulation, rec: Recorder, gain: float = 0.5, latency: float = 0.0, answer=None) -> None:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from tests.daemons import Daemon, free_tcp_port, free_udp_port
-from tests.e2e.test_monitor_paper import wait_ready
+from tests.monitor_bus import wait_ready
 
 RATE = 20  # Hz: h = 0.05 s
 

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from tests.daemons import Daemon, free_tcp_port, wait_for
-from tests.e2e.test_mavproxy import _tlog_counts
-from tests.e2e.test_monitor_paper import processed_count, wait_ready
+from tests.e2e.mavproxy_router import tlog_counts
+from tests.monitor_bus import processed_count, wait_ready
 from tests.readme_blocks import Session, group
 
 RATE = 20  # Hz: h = 0.05 s
@@ -47,7 +47,7 @@ def _fly(d: Path, master: int, sysid: int, steps: int, *vehicle_args: str) -> No
 
 
 def _logged(tlog: Path, sysid: int, steps: int) -> None:
-    wait_for(lambda: tlog.exists() and _tlog_counts(tlog)[("AOA_SSA", sysid)] >= steps - 1, 15,
+    wait_for(lambda: tlog.exists() and tlog_counts(tlog)[("AOA_SSA", sysid)] >= steps - 1, 15,
              what=f"MAVProxy's tlog to hold vehicle {sysid}'s flight")
 
 

@@ -1,6 +1,6 @@
 """An aircraft about a non-zero operating point, end to end: a real ``fault-monitor run`` (closed loop and
 observe-only) against an independent pymavlink peer that flies the 4-state linear plant of
-tests/test_link_aircraft_signals.py in deviation coordinates and puts ABSOLUTE values on the wire
+tests/aircraft_files.py in deviation coordinates and puts ABSOLUTE values on the wire
 (alpha0 + alpha, ..., the elevator with its trim), VFR_HUD included, one message per datagram in a shuffled
 order. The commands on the wire must be u0 + u with u recomputed by the test from eqs. (5)-(6) in deviations,
 the 2-degree elevator bias must be estimated within 5 %, and ``analyse`` of the flight's log and ``replay``
@@ -21,10 +21,10 @@ import numpy as np
 from monitor.link.tlog import TlogWriter
 from monitor.model.plant import parse_plant
 from monitor.wire.mavlink import mavlink
+from tests.aircraft_files import AIRCRAFT_PLANT, LIMIT, OP, U0, Y0, aircraft_files
 from tests.daemons import REPO, Daemon, free_tcp_port, free_udp_port, wait_for
-from tests.e2e.test_monitor_paper import processed_count, settling_k, wait_ready
 from tests.e2e.wire_peer import DEG, PeerVehicle, fly_udp, read_gains
-from tests.test_link_aircraft_signals import AIRCRAFT_PLANT, LIMIT, OP, U0, Y0, aircraft_files
+from tests.monitor_bus import processed_count, settling_k, wait_ready
 
 STEPS = 80
 ONSET = 20

@@ -16,15 +16,7 @@ from pathlib import Path
 
 from monitor.wire.mavlink import mavlink, new_codec
 from tests.daemons import free_udp_port, wait_for
-from tests.e2e.test_monitor_paper import (  # noqa: F401 (gains_file is a fixture)
-    gains_file,
-    monitor_daemon,
-    processed_count,
-    settling_k,
-    sim_daemon,
-    wait_ready,
-    zenoh_bus,
-)
+from tests.monitor_bus import monitor_daemon, processed_count, settling_k, sim_daemon, wait_ready, zenoh_bus
 
 STEPS, SPEEDUP, ONSET, NAN_AT = 60, 20, 20, 32  # NaN once f_hat has settled: it must stay settled
 

@@ -9,7 +9,7 @@ import sys
 import tomllib
 
 from monitor.model.plant import load_plant
-from tests.test_identify import fly, write_tlog
+from tests.c172p_flights import fly, write_tlog
 
 
 def _cli(*argv: str, timeout: float = 150.0) -> subprocess.CompletedProcess:

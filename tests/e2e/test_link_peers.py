@@ -15,9 +15,9 @@ from monitor.gains import write_gains
 from monitor.model.plant import load_plant, parse_plant
 from monitor.wire.mavlink import mavlink, new_codec
 from tests.daemons import REPO, Daemon, free_tcp_port, free_udp_port
-from tests.e2e.test_monitor_paper import gains_file, processed_count, wait_ready  # noqa: F401 (fixture)
 from tests.e2e.wire_peer import (PeerVehicle, check_against_equations, fly_tcp_client, fly_tcp_server, fly_udp,
                                  read_gains)
+from tests.monitor_bus import processed_count, wait_ready
 
 STEPS = 60
 

@@ -12,64 +12,11 @@ import json
 import os
 import signal
 import subprocess
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
-from monitor.errors import UserError
-from monitor.process import stop_process_group
-from monitor.service.live_sinks import viewer_answers
 from tests.daemons import free_tcp_port, free_udp_port, wait_for
-from tests.e2e.test_monitor_paper import (  # noqa: F401  (gains_file is a fixture)
-    gains_file,
-    monitor_daemon,
-    processed_count,
-    sim_daemon,
-    wait_ready,
-    zenoh_bus,
-)
-
-
-def _viewer_binary() -> str:
-    """The real viewer binary: the ``rerun`` script in the venv is a Python wrapper whose child a signal to
-    the wrapper would leave running."""
-    import rerun_cli
-
-    return str(Path(rerun_cli.__file__).parent / "rerun")
-
-
-@contextmanager
-def headless_viewer(tmp_path: Path, port: int, out: Path) -> Iterator[subprocess.Popen]:
-    """``rerun --save OUT`` on loopback ``port``: stores whatever is streamed to it; always stopped."""
-    log = open(tmp_path / f"viewer-{port}.log", "wb")
-    proc = subprocess.Popen([_viewer_binary(), "--bind", "127.0.0.1", "--port", str(port), "--save", str(out)],
-                            stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
-                            env={**os.environ, "RERUN_ANALYTICS": "0"})
-    try:
-        wait_for(lambda: viewer_answers("127.0.0.1", port) or proc.poll() is not None, 15, what="viewer listening")
-        assert proc.poll() is None, (tmp_path / f"viewer-{port}.log").read_text(errors="replace")
-        yield proc
-    finally:
-        stop_process_group(proc, 5)
-        log.close()
-
-
-def _load_when_complete(path: Path, samples: int, timeout: float = 10.0):
-    """The viewer writes its file from its own threads: read it back once it holds ``samples`` samples."""
-    from monitor.service.recording_reader import load_recording
-
-    got = {}
-
-    def complete() -> bool:
-        try:
-            got["rec"] = load_recording(path)
-        except UserError:  # not written yet, or a chunk half-written
-            return False
-        vehicles = got["rec"].vehicles
-        return 1 in vehicles and len(vehicles[1].samples) >= samples
-
-    wait_for(complete, timeout, interval=0.2, what=f"{samples} samples in {path.name}")
-    return got["rec"]
+from tests.monitor_bus import monitor_daemon, processed_count, sim_daemon, wait_ready, zenoh_bus
+from tests.rerun_viewer import headless_viewer, load_when_complete
 
 
 def test_the_viewer_and_the_file_get_every_sample(tmp_path: Path, gains_file: Path) -> None:
@@ -89,7 +36,7 @@ def test_the_viewer_and_the_file_get_every_sample(tmp_path: Path, gains_file: Pa
             monitor.signal(signal.SIGTERM)
             assert monitor.wait(15) == 0, monitor.log()
         n = processed_count(monitor.log())
-        live = _load_when_complete(seen, n)
+        live = load_when_complete(seen, n)
         assert viewer.poll() is None
     log = monitor.log()
     assert "WARNING" not in log, log

@@ -15,55 +15,17 @@ import re
 import shutil
 import subprocess
 import sys
-from collections import Counter
 from pathlib import Path
 
 import numpy as np
-import pytest
 
-from monitor.process import udp_port_taken
-from tests.daemons import Daemon, free_tcp_port, free_udp_port, wait_for
-from tests.e2e.test_monitor_paper import gains_file, processed_count, wait_ready  # noqa: F401 (fixture)
+from tests.daemons import Daemon, free_tcp_port, free_udp_port
+from tests.e2e.mavproxy_router import MavProxy, tlog_counts
+from tests.monitor_bus import processed_count, wait_ready
 from tests.readme_blocks import Session, group
 
 STEPS = 40
 SPEEDUP = 10
-
-
-def _mavproxy_script() -> str:
-    script = Path(sys.executable).with_name("mavproxy.py")
-    if not script.exists():
-        pytest.fail("mavproxy.py not found beside the interpreter: install the test extra (pip install '.[test]')")
-    return str(script)
-
-
-class MavProxy(Daemon):
-    """Headless MAVProxy routing ``master`` (where the vehicle sends) to the monitor, writing a tlog."""
-
-    def __init__(self, tmp_path: Path, master: int, out: int, out_kind: str = "udpout") -> None:
-        super().__init__("x", [], tmp_path / "mavproxy.log")
-        self.tlog = tmp_path / "mavproxy.tlog"
-        self.master = master
-        self.cmd = [sys.executable, _mavproxy_script(), f"--master=udpin:127.0.0.1:{master}",
-                    f"--out={out_kind}:127.0.0.1:{out}", "--daemon", "--mav20", "--dialect=ardupilotmega",
-                    f"--state-basedir={tmp_path}", f"--logfile={self.tlog}", "--default-modules=", "--nowait",
-                    "--cmd=set flushlogs True"]  # else the tlog tail sits in a buffer a signal may never write
-
-    def __enter__(self) -> "MavProxy":
-        super().__enter__()
-        wait_for(lambda: udp_port_taken(self.master) or self.proc.poll() is not None, 30, what="MAVProxy listening")
-        assert self.proc.poll() is None, self.log()
-        return self
-
-    def stop(self, timeout: float = 10.0):
-        import signal
-
-        self.signal(signal.SIGINT)  # MAVProxy closes its log on SIGINT
-        try:
-            self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            pass
-        return super().stop(timeout)
 
 
 def _wait_for_tlog(tlog: Path, timeout: float = 10.0) -> None:
@@ -73,22 +35,9 @@ def _wait_for_tlog(tlog: Path, timeout: float = 10.0) -> None:
 
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        if tlog.exists() and _tlog_counts(tlog)[("AOA_SSA", 1)] >= STEPS - 1:  # as the tests require
+        if tlog.exists() and tlog_counts(tlog)[("AOA_SSA", 1)] >= STEPS - 1:  # as the tests require
             return
         time.sleep(0.2)
-
-
-def _tlog_counts(path: Path) -> Counter:
-    from pymavlink import mavutil
-
-    log = mavutil.mavlink_connection(str(path), dialect="ardupilotmega")
-    counts: Counter = Counter()
-    while (msg := log.recv_match(blocking=False)) is not None:
-        name = msg.get_type()
-        if name == "NAMED_VALUE_FLOAT":
-            name += ":" + msg.name
-        counts[(name, msg.get_srcSystem())] += 1
-    return counts
 
 
 def _vehicle(tmp_path: Path, port: int, *extra: str) -> Daemon:
@@ -106,7 +55,7 @@ def _monitor(tmp_path: Path, gains: Path, port: int, *extra: str, kind: str = "u
 def _assert_closed_loop(monitor_log: str, applied: int, tlog: Path) -> None:
     assert processed_count(monitor_log) == STEPS, monitor_log[-2000:]
     assert applied >= 0.95 * STEPS, applied
-    counts = _tlog_counts(tlog)
+    counts = tlog_counts(tlog)
     for telemetry in ("ATTITUDE", "AOA_SSA", "ACTUATOR_OUTPUT_STATUS"):
         assert counts[(telemetry, 1)] >= STEPS - 1, counts
     assert counts[("SET_ACTUATOR_CONTROL_TARGET", 255)] >= STEPS - 1, counts
@@ -158,7 +107,7 @@ def test_observe_only_live_and_from_mavproxys_tlog_agree(tmp_path: Path, gains_f
         assert monitor.stop() == 0, monitor.log()[-2000:]
     log = monitor.log()
     assert processed_count(log) == STEPS and "commands 0" in log, log[-2000:]
-    assert _tlog_counts(mp.tlog)[("SET_ACTUATOR_CONTROL_TARGET", 255)] == 0
+    assert tlog_counts(mp.tlog)[("SET_ACTUATOR_CONTROL_TARGET", 255)] == 0
     result = subprocess.run([sys.executable, "-m", "monitor", "analyse", str(mp.tlog), "--plant", "paper-continuous",
                              "--gains", str(gains_file), "--rrd", str(offline_rrd), "--json", "--fault", "bias:2@20"],
                             capture_output=True, text=True, timeout=120)

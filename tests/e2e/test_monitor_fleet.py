@@ -18,15 +18,7 @@ from collections import Counter
 from pathlib import Path
 
 from tests.daemons import free_udp_port, wait_for
-from tests.e2e.test_monitor_paper import (  # noqa: F401  (gains_file is a fixture)
-    gains_file,
-    monitor_daemon,
-    processed_count,
-    settling_k,
-    sim_daemon,
-    wait_ready,
-    zenoh_bus,
-)
+from tests.monitor_bus import monitor_daemon, processed_count, settling_k, sim_daemon, wait_ready, zenoh_bus
 
 
 def _by_sysid(estimates: list[dict]) -> dict[int, list[dict]]:

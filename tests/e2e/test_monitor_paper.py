@@ -2,129 +2,22 @@
 loopback, a Zenoh router session in the test (daemons are its clients: in Zenoh 1.10 two peers linked only
 through a router do not see each other's publications with gossip off), and the .rrd read back.
 
-Also the shared helpers of the other ``test_monitor_*`` files (gains cached per plant hash, daemon starters,
-Zenoh collectors), kept here so that there is one copy.
+The rig (Zenoh bus, daemon starters, readings of a run) is ``tests/monitor_bus.py``; the certified gains are the
+``gains_file`` fixture of ``tests/conftest.py``.
 """
 
 from __future__ import annotations
 
-import json
-import re
 import signal
-import threading
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
 
-import pytest
-
-from tests.daemons import Daemon, free_tcp_port, free_udp_port, wait_for
+from tests.daemons import free_udp_port, wait_for
+from tests.monitor_bus import monitor_daemon, processed_count, settling_k, sim_daemon, wait_ready, zenoh_bus
 
 ONSET = 20
 BIAS = 2.0
 EARLIEST_SETTLING = 2  # no observer (5) can settle sooner: the fault first shows in y one sample after onset
 SLACK = 4  # "within a few samples of the limit"
-
-
-# -- shared helpers -----------------------------------------------------------------------------------------
-
-
-@pytest.fixture(scope="session")
-def gains_file(tmp_path_factory) -> Path:
-    """The default certified design for paper-continuous (what `fault-monitor design` writes), once per session
-    (the design itself once for both workers: ``tests/designs.py``)."""
-    from monitor.gains import write_gains
-    from tests.designs import designed
-
-    plant, result = designed("paper-continuous", "certified")
-    path = tmp_path_factory.mktemp("gains") / "certified.toml"
-    write_gains(path, result, plant)
-    return path
-
-
-class Bus:
-    """A Zenoh router session owned by the test, and JSON collectors on it."""
-
-    def __init__(self) -> None:
-        from monitor.wire.zenoh_session import build_config, open_session
-
-        self.endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-        self.session = open_session(build_config(listen=[self.endpoint], mode="router"))
-        self._subs: list = []
-
-    def collect(self, keyexpr: str) -> list[dict]:
-        got: list[dict] = []
-        lock = threading.Lock()
-
-        def on_sample(sample) -> None:
-            with lock:
-                got.append(json.loads(sample.payload.to_bytes()))
-
-        self._subs.append(self.session.declare_subscriber(keyexpr, on_sample))
-        return got
-
-    def query(self, keyexpr: str) -> list[tuple[str, dict]]:
-        out = []
-        for reply in self.session.get(keyexpr, timeout=3.0):
-            if reply.ok is not None:
-                out.append((str(reply.ok.key_expr), json.loads(reply.ok.payload.to_bytes())))
-        return out
-
-    def tokens(self, keyexpr: str) -> list[str]:
-        return [str(r.ok.key_expr) for r in self.session.liveliness().get(keyexpr, timeout=3.0) if r.ok is not None]
-
-    def close(self) -> None:
-        from monitor.wire.zenoh_session import close_quietly
-
-        close_quietly(self.session, *self._subs)
-
-
-@contextmanager
-def zenoh_bus() -> Iterator[Bus]:
-    bus = Bus()
-    try:
-        yield bus
-    finally:
-        bus.close()
-
-
-def monitor_daemon(tmp_path: Path, gains: Path, port: int, bus: Bus, name: str, *extra: str) -> Daemon:
-    args = ["run", "--plant", "paper-continuous", "--gains", str(gains), "--mavlink", f"udpin:127.0.0.1:{port}",
-            "--zenoh-mode", "client", "--zenoh-connect", bus.endpoint, "--name", name, *extra]
-    return Daemon("monitor", args, tmp_path / f"{name}.log")
-
-
-def sim_daemon(tmp_path: Path, port: int, bus: Bus, sysid: int, *extra: str, steps: int = 60,
-               speedup: float = 25) -> Daemon:
-    args = ["run", "--sysid", str(sysid), "--steps", str(steps), "--speedup", str(speedup),
-            "--mavlink", f"udpout:127.0.0.1:{port}", "--zenoh-mode", "client", "--zenoh-connect", bus.endpoint, *extra]
-    return Daemon("sim_vehicle", args, tmp_path / f"sim{sysid}-{port}.log")
-
-
-def wait_ready(monitor: Daemon) -> None:
-    wait_for(lambda: "ready:" in monitor.log() or monitor.proc.poll() is not None, 20, what="monitor ready")
-    assert "ready:" in monitor.log(), monitor.log()
-
-
-def processed_count(log: str) -> int:
-    match = re.search(r"samples processed (\d+)", log)
-    assert match, log[-2000:]
-    return int(match.group(1))
-
-
-def settling_k(estimates: list[dict], truth: float, tol: float) -> int | None:
-    """First k from which |f_hat - truth| <= tol holds for every later estimate."""
-    ordered = sorted(estimates, key=lambda e: e["k"])
-    settled = None
-    for e in ordered:
-        if abs(e["f_hat"][0] - truth) <= tol:
-            settled = e["k"] if settled is None else settled
-        else:
-            settled = None
-    return settled
-
-
-# -- the paper scenario -----------------------------------------------------------------------------------------
 
 
 def test_paper_scenario_estimates_alarm_status_and_recording(tmp_path: Path, gains_file: Path) -> None:

@@ -21,14 +21,7 @@ import signal
 from pathlib import Path
 
 from tests.daemons import Daemon, free_udp_port, wait_for
-from tests.e2e.test_monitor_paper import (  # noqa: F401  (gains_file is a fixture)
-    gains_file,
-    monitor_daemon,
-    processed_count,
-    sim_daemon,
-    wait_ready,
-    zenoh_bus,
-)
+from tests.monitor_bus import monitor_daemon, processed_count, sim_daemon, wait_ready, zenoh_bus
 
 STEPS = 30
 SPEEDUP = 20

@@ -130,7 +130,7 @@ def test_light_turbulence_is_the_same_flight_in_another_process_with_the_same_se
 def test_mavproxy_records_the_manoeuvre_in_its_tlog(tmp_path):
     from pymavlink import mavutil
 
-    from tests.e2e.test_mavproxy import MavProxy
+    from tests.e2e.mavproxy_router import MavProxy
 
     master, out = free_udp_port(), free_udp_port()
     steps = 120

@@ -19,9 +19,9 @@ import pytest
 from monitor.model.plant import load_plant
 from monitor.wire.mavlink import mavlink
 from tests.daemons import REPO, free_udp_port
-from tests.e2e.test_monitor_paper import monitor_daemon, processed_count, sim_daemon, wait_ready, zenoh_bus
 from tests.e2e.wire_peer import PeerVehicle, check_against_equations, fly_udp, read_gains
-from tests.test_service_vehicles import _gains_file
+from tests.gains_files import hand_made_gains_file
+from tests.monitor_bus import monitor_daemon, processed_count, sim_daemon, wait_ready, zenoh_bus
 
 STEPS = 60  # samples per run
 SILENCE_S = 1.6  # the monitor's restart_silence is 1 s
@@ -31,7 +31,7 @@ SYSID = 7
 @pytest.fixture(scope="module")
 def quick_gains(tmp_path_factory) -> Path:
     """Hand-made gains (no design: seconds saved); the restart logic does not depend on them."""
-    return _gains_file(tmp_path_factory.mktemp("restart-gains") / "gains.toml")
+    return hand_made_gains_file(tmp_path_factory.mktemp("restart-gains") / "gains.toml")
 
 
 class RestartedPeer(PeerVehicle):
