@@ -44,10 +44,30 @@ def _group(path: Path) -> str:
     return "e2e-daemons" if paced else f"module-{path.stem}"
 
 
+# modules outside tests/e2e that start daemons (fault-monitor run, sim-vehicle, a Zenoh router, MAVProxy)
+DAEMON_MODULES = {"test_readme", "test_recording_runs", "test_recorder", "test_live_sinks"}
+# modules whose tests take seconds each (designs through the CLI, margin searches, daemons); the rest of the
+# suite, `pytest -m "not slow"`, runs in well under a minute on two workers
+SLOW_MODULES = DAEMON_MODULES | {"test_threshold", "test_design", "test_design_portability", "test_losses",
+                                 "test_margin", "test_cli_offline", "test_api", "test_analyse",
+                                 "test_detectability_jsbsim", "test_multi_delay", "test_verify_output"}
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "daemons: starts daemons or programs on loopback (tests/e2e and DAEMON_MODULES)")
+    config.addinivalue_line("markers", "slow: seconds per test; `-m 'not slow'` is the quick subset")
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
-        item.add_marker(pytest.mark.xdist_group(_group(Path(str(item.fspath)))))
+        path = Path(str(item.fspath)).resolve()
+        item.add_marker(pytest.mark.xdist_group(_group(path)))
+        in_e2e = E2E in path.parents
+        if in_e2e or path.stem in DAEMON_MODULES:
+            item.add_marker(pytest.mark.daemons)
+        if in_e2e or path.stem in SLOW_MODULES:
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture(scope="session", autouse=True)
