@@ -70,8 +70,8 @@ def test_a_viewer_started_late_gets_the_kept_samples(tmp_path: Path) -> None:
         for s in samples:
             sink.put(s)
         with headless_viewer(tmp_path, port, out):
-            wait_for(lambda: sink.connected, 5, what="the sink connecting")
-            wait_for(lambda: sink.stats["written"] == 50, 5, what="the kept samples sent")
+            wait_for(lambda: sink.connected, 30, what="the sink connecting")
+            wait_for(lambda: sink.stats["written"] == 50, 30, what="the kept samples sent")
             sink.close()
             sink.join(5.0)
             got = load_when_complete(out, 50)

@@ -231,7 +231,7 @@ def test_observe_only_about_an_operating_point_and_analyse_of_the_log(tmp_path: 
         peer = AircraftPeer(plant, sysid=22, seed=8, autopilot=autopilot, tlog=tlog)
         wait_ready(monitor)
         _fly_observe(peer, port, STEPS)
-        wait_for(lambda: STEPS - 1 in peer.wire.fhat, 5, what="the last estimate")
+        wait_for(lambda: STEPS - 1 in peer.wire.fhat, 30, what="the last estimate")
         assert monitor.stop() == 0, monitor.log()[-3000:]
     log = monitor.log()
     assert "observe-only" in log and OP_LINE in log

@@ -139,7 +139,7 @@ def test_nan_spoofing_far_future_and_flood(tmp_path: Path, gains_file: Path) -> 
                 finally:
                     stop.set()
                     attacker.join(5)
-            wait_for(lambda: len(estimates) >= STEPS - 1, 5, what="estimates")
+            wait_for(lambda: len(estimates) >= STEPS - 1, 30, what="estimates")
             assert monitor.stop() == 0
             log = monitor.log()
     summary = json.loads(vehicle_json.read_text())
@@ -167,7 +167,7 @@ def test_all_late_commands_are_noticed_and_the_estimate_stays_bounded(tmp_path: 
             with sim_daemon(tmp_path, port, bus, 1, "--fault", f"bias:2@{ONSET}", "--delay", "const:1.2",
                             steps=STEPS, speedup=SPEEDUP) as sim:
                 assert sim.wait(60) == 0, sim.log()
-            wait_for(lambda: len(estimates) >= STEPS, 5, what="estimates")
+            wait_for(lambda: len(estimates) >= STEPS, 30, what="estimates")
             assert monitor.stop() == 0
             log = monitor.log()
     # before the fault the commands are ~0 and so is the held deflection: indistinguishable, counted applied
@@ -192,7 +192,7 @@ def test_signed_frames_replayed_from_a_new_port_publish_nothing(tmp_path: Path, 
                                 speedup=SPEEDUP) as sim:
                     assert sim.wait(60) == 0, sim.log()
                 captured = list(relay.captured)
-            wait_for(lambda: len(estimates) >= 30, 5, what="signed estimates")
+            wait_for(lambda: len(estimates) >= 30, 30, what="signed estimates")
             before = len(estimates)
             with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as replayer:
                 for data in captured:

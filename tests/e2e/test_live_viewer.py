@@ -73,7 +73,7 @@ def test_a_viewer_that_dies_or_never_answers_costs_neither_the_loop_nor_the_file
                 os.killpg(viewer.pid, signal.SIGKILL)  # the viewer is gone mid-run, without a goodbye
                 viewer.wait(5)
                 assert sim.wait(30) == 0, sim.log()
-            wait_for(lambda: f"live viewer {url} " in monitor.log(), 5, what="the lost viewer's WARNING")
+            wait_for(lambda: f"live viewer {url} " in monitor.log(), 30, what="the lost viewer's WARNING")
             monitor.signal(signal.SIGTERM)
             assert monitor.wait(10) == 0, monitor.log()
     from monitor.service.recording_reader import load_recording

@@ -31,7 +31,7 @@ def test_paper_scenario_estimates_alarm_status_and_recording(tmp_path: Path, gai
             wait_for(lambda: bus.tokens("uav/monitor/*") == ["uav/monitor/paper"], 10, what="liveliness token")
             with sim_daemon(tmp_path, port, bus, 1, "--fault", f"bias:{BIAS}@{ONSET}", "--seed", "3") as sim:
                 assert sim.wait(30) == 0, sim.log()
-            wait_for(lambda: len(estimates) >= 60, 5, what="60 estimates")
+            wait_for(lambda: len(estimates) >= 60, 30, what="60 estimates")
             [(key, status)] = bus.query("uav/*/fault/status")
             assert key == "uav/1/fault/status" and status["k"] == 59 and status["unit"] == "deg"
             monitor.signal(signal.SIGTERM)

@@ -76,7 +76,7 @@ def test_signed_link_closes_the_loop_and_a_wrong_key_processes_nothing(tmp_path:
                                "--summary-json", str(bad_json), steps=STEPS, speedup=SPEEDUP) as sim_bad:
                 assert sim_good.wait(30) == 0, sim_good.log()
                 assert sim_bad.wait(30) == 0, sim_bad.log()
-            wait_for(lambda: len([e for e in estimates if e["sysid"] == 1]) >= STEPS, 5, what="signed estimates")
+            wait_for(lambda: len([e for e in estimates if e["sysid"] == 1]) >= STEPS, 30, what="signed estimates")
             good_log, bad_log = _stop(good), _stop(bad)
 
     # same key: every sample processed and answered, the vehicle applied the (signed) commands
@@ -125,7 +125,7 @@ def test_fleet_serves_listed_vehicles_and_refuses_an_unlisted_one(tmp_path: Path
                     sim_daemon(tmp_path, port, bus, 2, "--fault", "bias:-1@10", "--seed", "7", steps=STEPS,
                                speedup=SPEEDUP) as b:
                 assert a.wait(30) == 0 and b.wait(30) == 0 and c.wait(30) == 0, (a.log(), b.log(), c.log())
-            wait_for(lambda: len(estimates) >= 2 * STEPS, 5, what=f"{2 * STEPS} estimates")
+            wait_for(lambda: len(estimates) >= 2 * STEPS, 30, what=f"{2 * STEPS} estimates")
             assert monitor.proc.poll() is None, "the monitor stopped serving"
             statuses = {key for key, _ in bus.query("uav/*/fault/status")}
             log = _stop(monitor)
@@ -154,7 +154,7 @@ def test_silent_vehicle_is_forgotten_after_the_timeout(tmp_path: Path, gains_fil
             wait_ready(monitor)
             with sim_daemon(tmp_path, port, bus, 5, "--fault", "bias:2@10", steps=STEPS, speedup=SPEEDUP) as first:
                 assert first.wait(30) == 0, first.log()
-            wait_for(lambda: len(estimates) >= STEPS, 5, what="first run's estimates")
+            wait_for(lambda: len(estimates) >= STEPS, 30, what="first run's estimates")
             # housekeeping runs about once a second: forgotten within timeout + ~1 s (bounded generously)
             wait_for(lambda: "vehicle sysid 5 silent for" in monitor.log(), timeout + 5,
                      what="the silent vehicle to be dropped")
@@ -162,7 +162,7 @@ def test_silent_vehicle_is_forgotten_after_the_timeout(tmp_path: Path, gains_fil
             with sim_daemon(tmp_path, port, bus, 5, "--fault", "bias:-1@5", "--seed", "9", steps=STEPS,
                             speedup=SPEEDUP) as second:  # a new process: a new ephemeral source port
                 assert second.wait(30) == 0, second.log()
-            wait_for(lambda: len(estimates) >= 2 * STEPS, 5, what="second run's estimates")
+            wait_for(lambda: len(estimates) >= 2 * STEPS, 30, what="second run's estimates")
             log = _stop(monitor)
 
     second_run = estimates[len(first_run):]

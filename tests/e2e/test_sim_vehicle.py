@@ -111,7 +111,7 @@ def test_truth_reaches_a_zenoh_subscriber_as_json(tmp_path):
         with vehicle(tmp_path, free_udp_port(), "--steps", "12", "--speedup", "8", "--sysid", "7",
                      "--key-prefix", "e2e/net1", "--zenoh-connect", f"tcp/127.0.0.1:{zport}") as d:
             assert d.wait(20) == 0, d.log()
-        wait_for(lambda: any(json.loads(p)["k"] == 11 for _, _, p in got), 5, what="the last truth sample")
+        wait_for(lambda: any(json.loads(p)["k"] == 11 for _, _, p in got), 30, what="the last truth sample")
     finally:
         close_quietly(session, sub)
     assert {k for k, _, _ in got} == {"e2e/net1/7/truth"}
