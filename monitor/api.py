@@ -27,7 +27,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
@@ -38,6 +38,10 @@ from monitor.model.plant import Plant, load_plant, plant_from_table
 from monitor.model.simulate import Trace
 from monitor.checks.verify import Verdict
 
+if TYPE_CHECKING:  # at run time imported by the functions that return them, as the rest of this module does
+    from monitor.checks.verify_losses import LossVerdict
+    from monitor.service.recording_reader import Recording
+
 __all__ = ["Gains", "Plant", "DesignResult", "Verdict", "SimulatedRun", "load_plant", "plant_from_arrays",
            "plant_from_statespace", "design_gains", "check_gains", "check_losses", "simulate", "read_gains",
            "read_recording", "report"]
@@ -46,7 +50,8 @@ ArrayLike = Any  # anything numpy.asarray takes: nested lists, numpy arrays
 
 
 def _rows(a: ArrayLike) -> list[list[float]]:
-    return np.atleast_2d(np.asarray(a, dtype=float)).tolist()
+    rows: list[list[float]] = np.atleast_2d(np.asarray(a, dtype=float)).tolist()
+    return rows
 
 
 def plant_from_arrays(*, h: float, tau_max: float, tau_min: float = 0.0, C: ArrayLike, A_c: ArrayLike = None,
@@ -149,7 +154,8 @@ def check_gains(plant: Plant, gains: Gains, result: DesignResult | None = None) 
     return verify_gains(plant, gains, result.certificate or None, result.gamma_e, result.gamma_z)
 
 
-def check_losses(plant: Plant, gains: Gains, max_losses: int, result: DesignResult | None = None):
+def check_losses(plant: Plant, gains: Gains, max_losses: int,
+                 result: DesignResult | None = None) -> LossVerdict:
     """``verify --max-losses N``'s loss verdict (``stable`` True only with a proof; see monitor.checks.verify_losses)."""
     from monitor.checks.verify_losses import verify_losses
 
@@ -202,7 +208,7 @@ def read_gains(path: str | Path) -> Gains:
     return read(path).gains
 
 
-def read_recording(path: str | Path):
+def read_recording(path: str | Path) -> Recording:
     """Every vehicle's rows of a recording (``.rrd`` from ``run``/``analyse``): ``Recording.vehicles[sysid]``."""
     from monitor.service.recording_reader import load_recording
 

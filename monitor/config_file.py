@@ -81,6 +81,7 @@ def _scalar(action: argparse.Action, value: Any, where: str) -> Any:
         out = value
     else:
         try:
+            # typeshed lets Action.type be a registry name (a str); the parser's types are all callables
             out = convert(value if isinstance(value, str) else str(value))  # type: ignore[operator]
         except (TypeError, ValueError, argparse.ArgumentTypeError) as exc:
             raise UserError(f"{where}: {exc}") from None

@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -33,6 +33,9 @@ from monitor.checks.detectability import Detectability, upcrossing_rate
 from monitor.errors import UserError
 from monitor.model.plant import Plant
 from monitor.wire.telemetry import SAMPLE_FIELDS, Sample, quantities
+
+if TYPE_CHECKING:
+    from sim_vehicle.simulation import Simulation
 
 __all__ = ["ClosedLoop", "sample_values", "MonteCarlo", "FlightPlan", "monte_carlo"]
 
@@ -85,7 +88,7 @@ class ClosedLoop:
         self._values = sample_values(self.signals)
         self.alarm = Alarm(alarm) if alarm is not None else None
         self.events: list[tuple[int, str]] = []  # (sample, "raised" or "cleared")
-        self.sim = None
+        self.sim: Simulation | None = None
         self.now = 0.0
         self.f_hat: dict[int, float] = {}
         self.y: dict[int, list[float]] = {}  # outputs, deviations from the operating point
@@ -101,6 +104,7 @@ class ClosedLoop:
             event = self.alarm.update(float(np.max(np.abs(step.f_hat))))
             if event is not None:
                 self.events.append((sample.k, event))
+        assert self.sim is not None  # samples come from the simulation fly() runs
         self.sim.receive_command(sample.k, self.signals.absolute(step.u)[0], self.now)
 
     def raised(self, first: int = 0, last: float = math.inf) -> list[int]:
@@ -232,6 +236,7 @@ def monte_carlo(model, prediction: Detectability, flights: int, plan: FlightPlan
     v0 = float(np.mean(np.concatenate(fh_all) ** 2))
     v1 = float(np.mean(np.concatenate([f[:-1] * f[1:] for f in fh_all])))
     std, rho = prediction.fhat_std, prediction.fhat_rho
+    assert std is not None and rho is not None  # a turbulence prediction (checked above) carries them
     measured = None
     if disturbances:  # per flight; pooled as the rms sigma and the mean time constant
         measured = {"sigma": float(np.sqrt(np.mean([g["sigma"] ** 2 for g in disturbances]))),
@@ -255,8 +260,8 @@ def _flight_disturbance(plant: Plant, signals, loop: ClosedLoop, first: int, las
     from monitor.model.identification import gust_from_residual
 
     ks = np.arange(first, last)
-    x = np.array([loop.y[k] for k in ks])
-    u = np.array([loop.u[k] for k in ks])
+    x = np.array([loop.y[k] for k in range(first, last)])
+    u = np.array([loop.u[k] for k in range(first, last)])
     return gust_from_residual(ks, x, u, plant.A, plant.B0 + plant.B1, tuple(signals.outputs), plant.h)
 
 
@@ -265,9 +270,11 @@ def _smallest_bias(model, plan: FlightPlan, prediction: Detectability, seed: int
     h = model.plant.h
     onset = int(round(plan.warmup_s / h))
     seconds = (onset + window + 2) * h
+    level = prediction.turbulence
+    assert level is not None  # monte_carlo flies a turbulence prediction
 
     def detected(b: float) -> bool:
-        loop = _fly(model, plan, prediction.turbulence, seed, seconds, b, onset, alarm)
+        loop = _fly(model, plan, level, seed, seconds, b, onset, alarm)
         return _detected(loop, onset, window) is not None
 
     lo, hi = 0.0, prediction.bias

@@ -65,7 +65,8 @@ def _fault_from_spec(k: np.ndarray, spec: str) -> _Fault:
     if onset is None:
         return _Fault(f, None, None, None, "spec", spec)
     ends = [ev.end for ev in schedule.events if ev.start == onset]
-    stop = None if None in ends else max(ends)  # an intermittent fault is scored on its episode
+    bounded = [end for end in ends if end is not None]
+    stop = max(bounded) if len(bounded) == len(ends) else None  # an intermittent fault is scored on its episode
     window = (k >= onset) & (k < stop if stop is not None else True)
     size = float(np.max(np.abs(f[window]))) if window.any() else None
     return _Fault(f, onset, size, stop, "spec", spec)
@@ -141,8 +142,8 @@ def score_vehicle(series: VehicleSeries, fault_spec: str | None = None,
         "first_alarm_k": first_any,
         "first_alarm_t": t_of.get(first_any) if first_any is not None else None,
         "detection_k": detected,
-        "detection_steps": None if detected is None else detected - onset,
-        "detection_s": _times(None if detected is None else detected - onset, h),
+        "detection_steps": None if detected is None or onset is None else detected - onset,
+        "detection_s": _times(None if detected is None or onset is None else detected - onset, h),
         # with no known fault (no truth, no SPEC) a raise cannot be called false: None, not a guess
         "false_alarms": metrics.false_alarms(k, alarm, onset) if fault is not None else None,
         "fault_note": note,
@@ -154,7 +155,7 @@ def score_vehicle(series: VehicleSeries, fault_spec: str | None = None,
         "rms_ef_after_onset": rms_ef_post,
         "peak_alpha": metrics.peak_abs(alpha),
         "rms_alpha": metrics.rms(alpha[~np.isnan(alpha)]),
-        "peak_q": metrics.peak_abs([r.q for r in s]),
+        "peak_q": metrics.peak_abs(np.array([r.q for r in s], dtype=float)),
         "tau_obs_s": metrics.percentiles([r.tau_obs for r in s if r.tau_obs is not None]),
         "tau_true_s": metrics.percentiles([r.tau for r in series.truth if r.tau is not None]),
         "processing_ms": metrics.percentiles(processing),

@@ -202,7 +202,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         truth = TruthPublisher(session, truth_key if session is not None else None, args.truth_jsonl)
         publisher = truth.publisher
-        sim = Simulation(
+        sim = Simulation(  # sink=None below: run_daemon plugs its UDP sink in before the first event
             plant=settings.plant, sink=None, sysid=settings.sysid, steps=settings.steps,  # type: ignore[arg-type]
             fault=settings.fault, delay=settings.delay, wind=settings.wind, impairment=settings.impairment,
             delay_split=settings.delay_split, sensor_noise=settings.sensor_noise, seed=settings.seed, x0=settings.x0,

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -37,6 +38,9 @@ from monitor.model.plant import Plant, load_plant
 from monitor.wire.specs import (DelaySampler, Excitation, FaultSchedule, Wind, parse_delay_spec, parse_excite_spec,
                                 parse_fault_spec, parse_wind_spec)
 from sim_vehicle.network import Impairment
+
+if TYPE_CHECKING:
+    from sim_vehicle.jsbsim_model import AircraftSpec  # imported lazily at run time (JSBSim runs only)
 
 __all__ = ["Settings", "apply_config_file", "settings_from_args", "parse_udpout", "parse_hostport"]
 
@@ -60,19 +64,23 @@ class Settings:
     target: tuple[str, int]
     bind: tuple[str, int]
     autopilot: np.ndarray | None = None
-    aircraft: "AircraftSpec | None" = None  # noqa: F821 (sim_vehicle.jsbsim_model, imported lazily)
+    aircraft: AircraftSpec | None = None
     excite: Excitation | None = None
 
     @property
     def h(self) -> float:
-        return self.aircraft.h if self.aircraft is not None else self.plant.h  # type: ignore[union-attr]
+        if self.aircraft is not None:
+            return self.aircraft.h
+        assert self.plant is not None  # exactly one of plant and aircraft is set
+        return self.plant.h
 
     @property
     def vehicle(self) -> str:
         """What flies, for log lines."""
         if self.aircraft is not None:
             return f"aircraft {self.aircraft.name}"
-        return f"plant {self.plant.name}"  # type: ignore[union-attr]
+        assert self.plant is not None  # exactly one of plant and aircraft is set
+        return f"plant {self.plant.name}"
 
 
 AIRCRAFT_DEFAULTS = {"airspeed": 100.0, "altitude": 3000.0, "rate": 20.0, "turbulence": "none"}

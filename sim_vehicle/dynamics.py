@@ -63,12 +63,14 @@ class LinearFlightModel:
             raise ValueError(f"the initial state needs {n} values, got {self.x.size}")
         actuator = actuator or Actuator()
         limit = actuator.limit
-        self.travel = (-limit, limit) if limit is not None else (None, None)
+        self.travel: tuple[float | None, float | None] = ((-limit, limit) if limit is not None
+                                                          else (None, None))
         self.rate_limit = actuator.rate_limit
         self.trim_deflection = 0.0
         self.n_faults = model.D_cf.shape[1]
         self.n_wind = model.D_cd.shape[1]
-        self.state_names = ("alpha_deg", "q_deg_s") if n == 2 else tuple(f"x{i + 1}" for i in range(n))
+        self.state_names: tuple[str, ...] = (("alpha_deg", "q_deg_s") if n == 2
+                                             else tuple(f"x{i + 1}" for i in range(n)))
         self.t = 0.0
         self._cache: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
@@ -78,7 +80,8 @@ class LinearFlightModel:
             raise ValueError("the simulator needs a continuous plant (form = \"continuous\")")
         return cls(plant.continuous, plant.h, plant.actuator, x0, plant.name, plant.unit)
 
-    def step(self, T: float, deflection: float, rate: float, f: Sequence[float], d: Sequence[float]) -> None:
+    def step(self, T: float, deflection: float, rate: float, f: Sequence[float] | np.ndarray,
+             d: Sequence[float] | np.ndarray) -> None:
         phi, g1, g2 = self._matrices(T)
         B = self.model.B_c[:, 0]
         w = self.model.D_cf @ np.asarray(f, dtype=float) + self.model.D_cd @ np.asarray(d, dtype=float)
@@ -129,27 +132,31 @@ class Airframe:
 
     def __init__(self, model: FlightModel | ContinuousModel, actuator: Actuator | None = None,
                  x: Sequence[float] | None = None) -> None:
+        flight: FlightModel
         if isinstance(model, ContinuousModel):
-            model = LinearFlightModel(model, actuator=actuator, x=x)
+            flight = LinearFlightModel(model, actuator=actuator, x=x)
         elif actuator is not None or x is not None:
             raise ValueError("actuator and x belong to the linear model; a FlightModel brings its own")
-        self.flight: FlightModel = model
-        self.low, self.high = model.travel
-        self.rate_limit = model.rate_limit
-        self.t = model.t
-        self.position = float(model.trim_deflection)  # measured surface deflection, plant units
+        else:
+            flight = model
+        self.flight = flight
+        self.low, self.high = flight.travel
+        self.rate_limit = flight.rate_limit
+        self.t = flight.t
+        self.position = float(flight.trim_deflection)  # measured surface deflection, plant units
         self.target = self.position  # commanded deflection after clipping (trim until the first command)
         self.effectiveness = 1.0
         self.stuck = False
-        self.f = np.zeros(model.n_faults)
-        self.d = np.zeros(model.n_wind)
+        self.f = np.zeros(flight.n_faults)
+        self.d = np.zeros(flight.n_wind)
 
     @property
     def x(self) -> np.ndarray:
         return np.asarray(self.flight.state())
 
-    def set_interval(self, f: Sequence[float], d: Sequence[float], effectiveness: float = 1.0,
-                     stuck: bool = False, stuck_value: float | None = None) -> None:
+    def set_interval(self, f: Sequence[float] | np.ndarray, d: Sequence[float] | np.ndarray,
+                     effectiveness: float = 1.0, stuck: bool = False,
+                     stuck_value: float | None = None) -> None:
         """Hold fault ``f`` and wind ``d`` from now on; apply the deflection faults of this interval."""
         self.f = np.asarray(f, dtype=float)
         self.d = np.asarray(d, dtype=float)
@@ -175,13 +182,14 @@ class Airframe:
             T = t - self.t
             rate = 0.0
             gap = self.target - self.position
-            slewing = not self.stuck and self.rate_limit is not None and gap != 0.0
-            if slewing:
-                rate = float(np.sign(gap)) * self.rate_limit
-                T = min(T, abs(gap) / self.rate_limit)
+            # the rate limit while the surface slews (None: it is where it was told to be, or it jumps)
+            slewing = self.rate_limit if not self.stuck and gap != 0.0 else None
+            if slewing is not None:
+                rate = float(np.sign(gap)) * slewing
+                T = min(T, abs(gap) / slewing)
             self.flight.step(T, self.effectiveness * self.position, self.effectiveness * rate, self.f, self.d)
-            if slewing:
-                done = T >= abs(gap) / self.rate_limit
+            if slewing is not None:
+                done = T >= abs(gap) / slewing
                 self.position = self.target if done else self.position + rate * T
             self.t = t if T >= t - self.t else self.t + T
 

@@ -19,7 +19,10 @@ Units: degrees for angles and deflections, deg/s for rates, m/s for airspeed, se
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, Sequence, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, Sequence, runtime_checkable
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["FlightModel", "Outputs", "FlightModelError"]
 
@@ -61,7 +64,8 @@ class FlightModel(Protocol):
     state_names: tuple[str, ...]  # names of ``state()``'s entries, e.g. ("alpha_deg", "q_deg_s")
     t: float                      # simulated time reached (s)
 
-    def step(self, T: float, deflection: float, rate: float, f: Sequence[float], d: Sequence[float]) -> None:
+    def step(self, T: float, deflection: float, rate: float, f: Sequence[float] | np.ndarray,
+             d: Sequence[float] | np.ndarray) -> None:
         """Fly ``T`` seconds with the surface at ``deflection + rate * s`` (s from 0 to T), the additive fault
         ``f`` and the wind ``d`` held. ``deflection`` already includes the loss of effectiveness; how ``f``
         enters is the model's (the linear plant: through ``D_cf``; an aircraft: at the surface)."""

@@ -106,7 +106,7 @@ def _import_jsbsim():
 def _logger_class(jsbsim):  # noqa: ANN001, ANN202 - the lazily imported module and a class made from it
     """An ``FGLogger`` that hands each finished record (its text) to a Python callable."""
 
-    class RecordLogger(jsbsim.FGLogger):  # type: ignore[misc, name-defined]
+    class RecordLogger(jsbsim.FGLogger):  # type: ignore[name-defined]  # a base from the module given at run time
         def __init__(self, on_record: Callable[[str], None]) -> None:
             super().__init__()
             self._on_record = on_record
@@ -258,11 +258,11 @@ def _elevator_map(jsbsim, spec: AircraftSpec) -> tuple[np.ndarray, np.ndarray]:
 class JSBSimFlightModel:
     """A JSBSim aircraft trimmed at ``spec``'s operating point; a ``FlightModel`` in absolute degrees."""
 
-    state_names = ("alpha_deg", "q_deg_s", "theta_deg", "airspeed_m_s")
+    state_names: tuple[str, ...] = ("alpha_deg", "q_deg_s", "theta_deg", "airspeed_m_s")
     unit = "deg"
     n_faults = 1
     n_wind = 0  # JSBSim makes its own weather (--turbulence)
-    rate_limit = None
+    rate_limit: float | None = None
 
     def __init__(self, spec: AircraftSpec) -> None:
         jsbsim = _import_jsbsim()
@@ -277,7 +277,7 @@ class JSBSimFlightModel:
         self.trim_deflection = float(self.fdm["fcs/elevator-pos-deg"])
         total = float(self.fdm["fcs/elevator-cmd-norm"] + self.fdm["fcs/pitch-trim-cmd-norm"])
         self._deg, self._cmd = self._inverse(commands, deflections, total)
-        self.travel = (float(self._deg[0]), float(self._deg[-1]))
+        self.travel: tuple[float | None, float | None] = (float(self._deg[0]), float(self._deg[-1]))
         # the pitch trim moves into the command: the surface stays where the trim put it
         self.fdm["fcs/pitch-trim-cmd-norm"] = 0.0
         self.fdm["fcs/elevator-cmd-norm"] = total
@@ -318,7 +318,8 @@ class JSBSimFlightModel:
         self.fdm["atmosphere/turbulence/milspec/severity"] = severity
 
     # -- FlightModel -------------------------------------------------------------------------------
-    def step(self, T: float, deflection: float, rate: float, f: Sequence[float], d: Sequence[float]) -> None:
+    def step(self, T: float, deflection: float, rate: float, f: Sequence[float] | np.ndarray,
+             d: Sequence[float] | np.ndarray) -> None:
         t_end = self.t + T
         n_end = int(math.floor(t_end / self.dt + 0.5))
         bias = float(f[0]) if len(f) else 0.0
@@ -377,4 +378,4 @@ class JSBSimFlightModel:
                 "altitude_m": g("position/h-sl-meters"), "states": list(self.state_names)}
 
     def close(self) -> None:
-        self.fdm = None  # type: ignore[assignment]
+        self.fdm = None

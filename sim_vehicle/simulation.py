@@ -196,6 +196,7 @@ class Simulation:
 
     def _sample(self, t: float, k: int) -> None:
         model = self.model
+        assert model is not None  # __post_init__ made one
         self._end_interval(t, k - 1)
         self._settle_due(t)
         self.k = k
@@ -221,6 +222,7 @@ class Simulation:
         reported = self.airframe.position
         onboard = None
         if self.autopilot is not None:
+            assert self.plant is not None  # __post_init__: the autopilot comes with the linear plant
             onboard = float((self.autopilot @ (self.plant.C @ np.asarray(measured))).ravel()[0])
         elif k <= len(self._excite) and self.excite is not None:  # the manoeuvre, then trim once
             level = self._excite[k] * self.excite.amplitude if k < len(self._excite) else 0.0

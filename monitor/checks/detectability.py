@@ -40,13 +40,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.linalg
 import scipy.signal
 
 from monitor.errors import UserError
-from monitor.model.closed_loop import Gains, closed_loop, steady_state
+from monitor.model.closed_loop import Gains, LoopMatrices, closed_loop, steady_state
 from monitor.model.delay_model import b0_of_tau, tau_grid
 from monitor.model.estimator import report_pole
 from monitor.model.plant import Plant
@@ -122,13 +123,13 @@ class NoiseFigures:
     tau: float  # the constant delay where they are taken (the one with the highest threshold)
 
 
-def _loops(plant: Plant, gains: Gains, points: int = GRID):
+def _loops(plant: Plant, gains: Gains, points: int = GRID) -> list[tuple[float, LoopMatrices]]:
     steady = steady_state(plant, gains)
     return [(float(t), closed_loop(plant, gains, b0_of_tau(plant, float(t)), steady=steady))
             for t in tau_grid(plant, points)]
 
 
-def _noise_at(loop, p: int, sigma: float, time_constant: float, h: float, keep: float = 0.0) -> tuple[float, float]:
+def _noise_at(loop: LoopMatrices, p: int, sigma: float, time_constant: float, h: float, keep: float = 0.0) -> tuple[float, float]:
     """``(v0, v1)``: variance and lag-one covariance of the reported f_hat with the shaping filter in the loop."""
     A, B, C = _augmented(loop, p, sigma, time_constant, h, keep)
     P = scipy.linalg.solve_discrete_lyapunov(A, B @ B.T)
@@ -158,7 +159,7 @@ def fhat_noise(plant: Plant, gains: Gains, sigma: float, time_constant: float, p
         raise UserError(f"the disturbance needs sigma > 0 and time_constant > 0, got {sigma:g} and {time_constant:g}")
     if not (per_hour > 0 and math.isfinite(per_hour)):
         raise UserError(f"--false-alarms-per-hour must be a positive number, got {per_hour:g}")
-    best = None
+    best: tuple[NoiseFigures, float] | None = None
     for tau, loop in _loops(plant, gains, points):
         keep = report_pole(plant.h, report_time_constant)
         v0, v1 = _noise_at(loop, plant.p, sigma, time_constant, plant.h, keep)
@@ -166,6 +167,7 @@ def fhat_noise(plant: Plant, gains: Gains, sigma: float, time_constant: float, p
         c = gaussian_threshold(std, rho, plant.h, per_hour)
         if best is None or c > best[1]:
             best = (NoiseFigures(std=std, rho=rho, tau=tau), c)
+    assert best is not None  # the delay grid has at least one point
     noise, c = best
     if not c > 0:
         raise UserError(f"{per_hour:g} false alarms per hour is more than |f_hat| crosses even 0 "
@@ -182,7 +184,7 @@ def turbulence_threshold(plant: Plant, gains: Gains, level: str, altitude_ft: fl
 
 # --- the fault's step response and the smallest bias ---------------------------------------------------------
 
-def _step(loop, p: int, samples: int, keep: float = 0.0) -> np.ndarray:
+def _step(loop: LoopMatrices, p: int, samples: int, keep: float = 0.0) -> np.ndarray:
     """``s(j)``, j = 0..samples, of one loop: the reported f_hat after a unit bias from sample 0 (``1 - e_f``,
     low-passed as reported when ``keep`` > 0)."""
     x = loop.B[:, p:][:, 0].copy()  # the unit step's Delta f at sample -1
@@ -190,17 +192,20 @@ def _step(loop, p: int, samples: int, keep: float = 0.0) -> np.ndarray:
     for j in range(samples + 1):
         s[j] = 1.0 - float(loop.C_ef[0] @ x)
         x = loop.A @ x
-    return scipy.signal.lfilter([1.0 - keep], [1.0, -keep], s)
+    reported: np.ndarray = scipy.signal.lfilter([1.0 - keep], [1.0, -keep], s)
+    return reported
 
 
 def step_response(plant: Plant, gains: Gains, samples: int, report_time_constant: float | None = None,
                   points: int = GRID) -> np.ndarray:
     """``s(j)``, j = 0..samples: f_hat after a unit bias from sample 0, the smallest over constant delays."""
     keep = report_pole(plant.h, report_time_constant)
-    return np.min([_step(loop, plant.p, samples, keep) for _, loop in _loops(plant, gains, points)], axis=0)
+    worst: np.ndarray = np.min([_step(loop, plant.p, samples, keep) for _, loop in _loops(plant, gains, points)],
+                               axis=0)
+    return worst
 
 
-def _augmented(loop, p: int, sigma: float, time_constant: float, h: float,
+def _augmented(loop: LoopMatrices, p: int, sigma: float, time_constant: float, h: float,
                keep: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(A, B, C)`` of the loop driven by the Gauss-Markov ``d`` through its shaping filter, with the reported
     estimate's low-pass ``f_rep(k) = keep f_rep(k-1) + (1 - keep) f_hat(k)`` last; C gives ``f_rep`` (no fault:
@@ -296,7 +301,7 @@ class Detectability:
     report_time_constant: float | None = None  # the low-pass on the reported f_hat (s), None: none
     delays: str = "step response: worst constant delay of the interval"
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
@@ -339,6 +344,7 @@ def detectability(plant: Plant, gains: Gains, *, disturbance_bound: float | None
                              step_at=float(s[j]) if j >= 0 else math.nan, false_alarms_per_hour=0.0,
                              disturbance_bound=float(disturbance_bound), noise_bound=c0,
                              noise_bound_method=bound.method, **common)
+    assert turbulence is not None  # exactly one of the two (checked above)
     sigma, time_constant, ratio = scaled_disturbance(plant, turbulence, altitude_ft)
     noise, c = fhat_noise(plant, gains, sigma, time_constant, false_alarms_per_hour, report_time_constant)
     b, t = gaussian_bias(plant, gains, sigma, time_constant, c, samples, alarm_samples, probability,

@@ -12,6 +12,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from monitor.design import run_design
 from monitor.design.result import DesignResult
@@ -31,7 +32,7 @@ class Margin:
     no_certificate_at: float | None = None  # the smallest probed tau_max without a certificate (None: none failed)
 
 
-def _try(plant: Plant, tau_max: float, options: dict) -> tuple[Plant, DesignResult | None]:
+def _try(plant: Plant, tau_max: float, options: dict[str, Any]) -> tuple[Plant, DesignResult | None]:
     variant = with_tau_max(plant, tau_max)
     try:
         with warnings.catch_warnings():
@@ -54,7 +55,8 @@ def search_ceiling(plant: Plant, up_to: float | None = None) -> float:
 
 
 def delay_margin(plant: Plant, tolerance: float | None = None, curve_points: int = 6,
-                 progress: Callable[[str], None] | None = None, up_to: float | None = None, **options) -> Margin:
+                 progress: Callable[[str], None] | None = None, up_to: float | None = None,
+                 **options: Any) -> Margin:
     """Bisection on ``tau_max`` in ``[tau_min, search_ceiling)`` to ``tolerance`` (default h/200), then the curve
     below it. Past h each probe is a lagged plant (``monitor.model.long_delay``)."""
     say = progress or (lambda _text: None)
@@ -82,6 +84,7 @@ def delay_margin(plant: Plant, tolerance: float | None = None, curve_points: int
     curve = []
     for i in range(curve_points):
         t = plant.tau_min + (lo - plant.tau_min) * i / max(curve_points - 1, 1)
+        result: DesignResult | None
         if i == curve_points - 1:
             result = lo_design
         else:

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 import scipy.linalg
@@ -71,7 +72,7 @@ class ThresholdBound:
     vertices: int  # of the delay polytope
     seconds: float
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
@@ -154,9 +155,9 @@ def fault_threshold(plant: Plant, gains: Gains, disturbance_bound: float) -> Thr
 
 
 def _channel_proofs(c: np.ndarray, A: np.ndarray, B: np.ndarray, nominal: np.ndarray, head_terms: int,
-                    contracting: list[tuple[int, float]]) -> dict:
+                    contracting: list[tuple[int, float]]) -> dict[str, Any]:
     """Both proofs for one fault channel; ``bound`` is the smaller (either is a proof on its own)."""
-    out = {"blocks": None, "paths": None, "ellipsoid": None, "rate": None, "depth": 0, "block": 0, "contraction": 1.0}
+    out: dict[str, Any] = {"blocks": None, "paths": None, "ellipsoid": None, "rate": None, "depth": 0, "block": 0, "contraction": 1.0}
     if contracting:
         head, tail, (out["block"], out["contraction"]) = _channel_bound(c, A, B, _lyapunov_factor(nominal),
                                                                       head_terms, contracting)
@@ -166,8 +167,8 @@ def _channel_proofs(c: np.ndarray, A: np.ndarray, B: np.ndarray, nominal: np.nda
         R, out["rate"], gamma = norm
         out["ellipsoid"] = gamma * float(dual_norms(c, R)[0])
         out["paths"], out["depth"] = _best_first_bound(A, B, c, R, gamma)
-    found = {k: out[k] for k in ("paths", "blocks") if out[k] is not None}
-    out["method"] = min(found, key=found.get) if found else None
+    found: dict[str, float] = {k: out[k] for k in ("paths", "blocks") if out[k] is not None}
+    out["method"] = min(found, key=found.__getitem__) if found else None
     out["bound"] = found[out["method"]] if found else None
     return out
 
@@ -236,7 +237,7 @@ def _common_norm(A: np.ndarray, B: np.ndarray, c: np.ndarray) -> tuple[np.ndarra
     """
     import cvxpy as cp
 
-    from monitor.design.solve import EPS, SolveFailed, solve_checked
+    from monitor.design.solve import EPS, SolveFailed, solve_checked, value_of
 
     N = A.shape[1]
     rho2 = cp.Parameter(nonneg=True)
@@ -245,8 +246,8 @@ def _common_norm(A: np.ndarray, B: np.ndarray, c: np.ndarray) -> tuple[np.ndarra
     rate = cp.Problem(cp.Minimize(0), [P >> np.eye(N), cp.trace(P) <= 1e4 * N, *contract])
 
     def contracts() -> float:  # rho^2 - max ||R A_i R^-1||^2 with P = R'R: how strictly every vertex contracts
-        R = norm_factor(0.5 * (P.value + P.value.T))
-        return -np.inf if R is None else float(rho2.value - np.max(induced_norms(R, A)) ** 2)
+        R = norm_factor(0.5 * (value_of(P) + value_of(P).T))
+        return -np.inf if R is None else float(value_of(rho2) - np.max(induced_norms(R, A)) ** 2)
 
     lo, hi = 0.0, 1.0
     for _ in range(RATE_BISECTIONS):  # the smallest common rate, to about 2^-RATE_BISECTIONS

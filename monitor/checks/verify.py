@@ -24,6 +24,7 @@ time-varying growth and the certificate's containment check.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 from scipy.optimize import linprog
@@ -53,7 +54,7 @@ class Verdict:
     gamma_z_claimed: float | None = None
     bound_holds: bool | None = None
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
@@ -77,7 +78,8 @@ def _points(plant: Plant, taus: np.ndarray, seed: int, mixed: int = 40) -> list[
     return points
 
 
-def _loops(plant: Plant, gains: Gains, points: list[np.ndarray], steady) -> list[LoopMatrices]:
+def _loops(plant: Plant, gains: Gains, points: list[np.ndarray],
+           steady: tuple[np.ndarray, np.ndarray]) -> list[LoopMatrices]:
     return [closed_loop(plant, gains, point, steady=steady) for point in points]
 
 
@@ -114,7 +116,8 @@ def _growth_rate(mats: list[np.ndarray], rng: np.random.Generator, steps: int = 
 
 
 def _check_certificate(plant: Plant, gains: Gains, certificate: dict[str, np.ndarray], gamma_e: float | None,
-                       gamma_z: float | None, steady, points: list[np.ndarray]) -> tuple[bool | None, str]:
+                       gamma_z: float | None, steady: tuple[np.ndarray, np.ndarray],
+                       points: list[np.ndarray]) -> tuple[bool | None, str]:
     """Re-check a polytopic certificate: containment of every point checked, then the BRL at every vertex."""
     if not {"P", "Q", "vertices"} <= set(certificate) or gamma_e is None or gamma_z is None:
         return None, "no polytopic certificate in the gains file"

@@ -44,7 +44,7 @@ class LossVerdict:
     proof: str  # which norm proved it, or why there is no proof
     contraction: float | None  # the proven per-macro-step contraction factor, when proven
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
@@ -62,8 +62,8 @@ def _pattern_growth(matrices: list[np.ndarray], sequence: list[int]) -> float:
     return float(np.exp(log_growth / len(sequence)))
 
 
-def _divergence_search(plant: Plant, gains: Gains, steady, max_losses: int, rng: np.random.Generator,
-                       steps: int = 1200) -> tuple[float, str]:
+def _divergence_search(plant: Plant, gains: Gains, steady: tuple[np.ndarray, np.ndarray], max_losses: int,
+                       rng: np.random.Generator, steps: int = 1200) -> tuple[float, str]:
     """The worst growth per sample over macro-steps on a delay grid and over long adversarial/random patterns."""
     taus = tau_grid(plant, 21)
     growth = macro_step_growth(plant, gains, [b0_of_tau(plant, float(t)) for t in taus], max_losses, steady)
@@ -84,17 +84,18 @@ def _divergence_search(plant: Plant, gains: Gains, steady, max_losses: int, rng:
             patterns[f"bursts of {n} {name}, delivered at alternating ends"] = \
                 sum(([ends[b % 2]] + run for b in range(steps // (n + 1))), [])
     for label in ("random delays", "random ends"):
-        seq, run = [], 0
+        drawn: list[int] = []
+        streak = 0
         for _ in range(steps):
-            if run < max_losses and rng.random() < 0.5:
-                seq.append(S_i if rng.random() < 0.5 else C_i)
-                run += 1
+            if streak < max_losses and rng.random() < 0.5:
+                drawn.append(S_i if rng.random() < 0.5 else C_i)
+                streak += 1
             else:
-                seq.append(int(rng.integers(len(delivered))) if label == "random delays" else ends[int(rng.integers(2))])
-                run = 0
-        patterns[f"random losses (<= {max_losses} in a row), {label}"] = seq
-    for name, seq in patterns.items():
-        rate = _pattern_growth(mats, seq)
+                drawn.append(int(rng.integers(len(delivered))) if label == "random delays" else ends[int(rng.integers(2))])
+                streak = 0
+        patterns[f"random losses (<= {max_losses} in a row), {label}"] = drawn
+    for name, pattern in patterns.items():
+        rate = _pattern_growth(mats, pattern)
         if rate > worst:
             worst, where = rate, name
     return worst, where
@@ -105,7 +106,7 @@ def _averaged_lyapunov(steps: list[np.ndarray], iterations: int = 500) -> np.nda
     N = steps[0].shape[0]
     P = np.eye(N)
     for _ in range(iterations):
-        nxt = np.eye(N) + sum(S.T @ P @ S for S in steps) / len(steps)
+        nxt: np.ndarray = np.eye(N) + sum(S.T @ P @ S for S in steps) / len(steps)
         if not np.all(np.isfinite(nxt)):
             return None
         if np.linalg.norm(nxt - P) <= 1e-10 * np.linalg.norm(nxt):

@@ -69,6 +69,12 @@ class _ModelRuns:
     flown: dict[str, Flown] = field(default_factory=dict)
 
 
+def _aircraft(scenario: Scenario) -> Aircraft:
+    """The scenario's aircraft: an aircraft demo's scenario always has one."""
+    assert scenario.aircraft is not None
+    return scenario.aircraft
+
+
 def _excitation(spec: str) -> Excitation:
     """The manoeuvre, parsed by the vehicle's own reader of ``--excite`` (the demo needs one: not ``none``)."""
     excitation = parse_excite_spec(spec)
@@ -127,7 +133,7 @@ def record_identification_flight(aircraft: Aircraft, excite: str, seed: int, spe
 def _flight_key(opt: AircraftDemoOptions) -> dict:
     """What the identification flight depends on: reuse the recorded one only when all of it is the same."""
     sc = opt.scenario
-    return {"aircraft": asdict(sc.aircraft), "excite": opt.excite, "seed": sc.seed, "sysid": 1}
+    return {"aircraft": asdict(_aircraft(sc)), "excite": opt.excite, "seed": sc.seed, "sysid": 1}
 
 
 def _identification_log(opt: AircraftDemoOptions, progress: Progress) -> Path:
@@ -143,7 +149,7 @@ def _identification_log(opt: AircraftDemoOptions, progress: Progress) -> Path:
         except ValueError:
             pass
     t0 = time.monotonic()
-    records = record_identification_flight(opt.scenario.aircraft, opt.excite, opt.scenario.seed, opt.excite_speedup,
+    records = record_identification_flight(_aircraft(opt.scenario), opt.excite, opt.scenario.seed, opt.excite_speedup,
                                            tlog, Path(opt.out) / "logs", progress)
     key_file.write_text(json.dumps(key, indent=2))
     progress(f"{'identification':<28} flight: {records} frames in {time.monotonic() - t0:.1f} s -> {tlog}", final=True)
@@ -156,7 +162,7 @@ def _identify_models(opt: AircraftDemoOptions, tlog: Path, progress: Progress) -
     sc = opt.scenario
     out: dict[str, IdentifiedLog] = {}
     for model in opt.models:
-        path = Path(opt.out) / "plants" / f"{sc.aircraft.name}-{model}.toml"
+        path = Path(opt.out) / "plants" / f"{_aircraft(sc).name}-{model}.toml"
         done = identify_log(IdentifyRequest(log=str(tlog), out=str(path), model=model))
         fits = ", ".join(f"{s} {f:.1f} %" for s, f in done.result.fit_validation.items())
         progress(f"{model:<28} identified: held-out fit {fits} -> {path}", final=True)
@@ -174,7 +180,7 @@ def _fly(model: str, d: Designed, scenario: Scenario, trim: tuple[float, float],
     flown = fly_live(d, scenario, out, progress, label=f"{model}-{d.method}", trim=trim)
     flown.row.model = model
     flown.row.ef_late, flown.row.alpha_late = late_window(flown.trace, parse_fault_spec(scenario.fault).onset,
-                                                          scenario.aircraft.rate, LATE_S)
+                                                          _aircraft(scenario).rate, LATE_S)
     return flown
 
 
@@ -222,7 +228,7 @@ def _report(opt: AircraftDemoOptions, identified: dict[str, IdentifiedLog], runs
     from monitor.demo.report import Row, format_table
 
     sc = opt.scenario
-    ac = sc.aircraft
+    ac = _aircraft(sc)
     out = Path(opt.out)
     rows = [Row.failed(m, r.failed[m].note, model) if m in r.failed else r.flown[m].row
             for model, r in runs.items() for m in opt.methods]
@@ -271,7 +277,7 @@ def _figures(opt: AircraftDemoOptions, identified: dict[str, IdentifiedLog], run
 
     out = Path(opt.out)
     onset = parse_fault_spec(opt.scenario.fault).onset
-    h = 1 / opt.scenario.aircraft.rate
+    h = 1 / _aircraft(opt.scenario).rate
     paths = [write_identification_figure(
         {m: i.result.validation_run for m, i in identified.items()},
         {m: i.result.state_names for m, i in identified.items()},

@@ -308,6 +308,7 @@ def _mc_result(opt: DemoOptions, plant: Plant, d: Designed) -> dict:
     from monitor.demo.montecarlo import monte_carlo
 
     sc = opt.scenario
+    assert opt.runs is not None  # demo --runs N
     scores = monte_carlo(plant, d.gains.gains, opt.runs, sc.steps, sc.fault, sc.delay, sc.wind, sc.seed)
     settle = [s.settling_steps for s in scores]
     settled = [s for s in settle if s is not None]
@@ -335,6 +336,8 @@ def _monte_carlo(opt: DemoOptions, plant: Plant, designed: dict[str, Designed], 
                  progress: Progress, t0: float) -> None:
     """The simulation-only comparison over delay seeds, written to montecarlo.json (summary.json is left alone)."""
     sc = opt.scenario
+    runs = opt.runs
+    assert runs is not None  # demo --runs N
     results = {}
     for m in opt.methods:
         if m in failed:
@@ -349,7 +352,7 @@ def _monte_carlo(opt: DemoOptions, plant: Plant, designed: dict[str, Designed], 
     print(head)
     print("-" * len(head))
     for m, r in results.items():
-        print(_mc_line(m, r, opt.runs))
+        print(_mc_line(m, r, runs))
     out = Path(opt.out)
     summary = {"mode": "monte-carlo", "options": asdict(opt), "results": results,
                "wall_seconds": round(time.monotonic() - t0, 2)}

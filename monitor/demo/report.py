@@ -66,7 +66,8 @@ def trace_from_recording(rrd: Path, fault_spec: str) -> tuple[Trace, dict]:
     tau_by_k = {r.k: r.tau for r in series.truth}
     trace = Trace(
         k=k, f=f,
-        f_hat=np.array([r.f_hat[0] for r in s]), alpha=np.array([r.alpha for r in s]), q=np.array([r.q for r in s]),
+        f_hat=np.array([r.f_hat[0] for r in s]), alpha=np.array([r.alpha for r in s], dtype=float),
+        q=np.array([r.q for r in s], dtype=float),
         u=np.array([r.u[0] for r in s]),
         tau=np.array([tau_by_k.get(int(kk)) if tau_by_k.get(int(kk)) is not None else math.nan for kk in k]),
         alarm=np.array([r.alarm for r in s], dtype=bool),
@@ -124,7 +125,7 @@ def _cells(r: Row, aircraft: bool) -> list[str]:
     if r.failure is not None:
         return [*first, r.failure]
     late = [_fmt(r.ef_late, ".3g", "-"), _fmt(r.alpha_late, ".3g", "-")] if aircraft else []
-    return [*first, "stable" if r.stable else "UNSTABLE", r.certificate, _fmt(r.gamma_e), _fmt(r.gamma_z),
+    return [*first, "stable" if r.stable else "UNSTABLE", r.certificate or "none", _fmt(r.gamma_e), _fmt(r.gamma_z),
             str(r.samples), _fmt(r.settling_steps, "d"), _fmt(r.rms_ef, ".3g"), *late, _fmt(r.peak_alpha_after, ".3g"),
             _fmt(r.rms_alpha_after, ".3g"), _fmt(r.alarm_delay, "d"), str(r.false_alarms)]
 

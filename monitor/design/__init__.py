@@ -8,7 +8,7 @@ objectives: ``fast`` (default, ``monitor.design.fast``) and ``hinf`` (the joint 
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 if TYPE_CHECKING:  # the CLI imports this module for METHODS and OBJECTIVES: no numpy, scipy or cvxpy at --help
     from monitor.design.result import DesignResult
@@ -48,7 +48,7 @@ def reported_error_bound(gamma_e: float, h: float, fault_time_constant: float | 
     return gamma_e + a / (1.0 - a)
 
 
-def run_design(method: str, plant: Plant, **options) -> DesignResult:
+def run_design(method: str, plant: Plant, **options: Any) -> DesignResult:
     """Dispatch to the method's module; imported lazily because cvxpy's import costs about a second."""
     objective = options.pop("objective", None)
     filtering = options.pop("fault_time_constant", None)  # None: the default for the air; 0: the raw estimate
@@ -68,19 +68,29 @@ def run_design(method: str, plant: Plant, **options) -> DesignResult:
                         f"tau_max = {plant.tau_max:g} s reaches past h = {plant.h:g} s: use certified (the default)")
     if objective is not None and (method != "certified" or objective not in OBJECTIVES):
         raise ValueError(f"objective {objective!r} applies to the certified method only (choose from {', '.join(OBJECTIVES)})")
+    design: Callable[..., DesignResult]
     if method == "certified" and objective in (None, "fast"):
-        from monitor.design.fast import design_fast as fn
+        from monitor.design.fast import design_fast
+
+        design = design_fast
     elif method == "certified":
-        from monitor.design.certified import design_certified as fn
+        from monitor.design.certified import design_certified
+
+        design = design_certified
     elif method == "paper":
-        from monitor.design.paper import design_paper as fn
+        from monitor.design.paper import design_paper
+
+        design = design_paper
     elif method == "separate":
-        from monitor.design.separate import design_separate as fn
+        from monitor.design.separate import design_separate
+
+        design = design_separate
     elif method == "robust-separate":
-        from monitor.design.robust_separate import design_robust_separate as fn
+        from monitor.design.robust_separate import design_robust_separate
+
+        design = design_robust_separate
     else:
         raise ValueError(f"unknown design method {method!r} (choose from {', '.join(METHODS)})")
-    design: Callable[..., DesignResult] = fn
     if method == "certified" and objective is None:
         result = _fast_or_hinf(plant, options)
     else:
@@ -100,7 +110,7 @@ def run_design(method: str, plant: Plant, **options) -> DesignResult:
     return result
 
 
-def _fast_or_hinf(plant: Plant, options: dict) -> DesignResult:
+def _fast_or_hinf(plant: Plant, options: dict[str, Any]) -> DesignResult:
     """The default objective: fast, and the H-infinity design when fast finds no certificate (said in the notes).
 
     Why: the fast objective pins the observer in closed form and searches only the controller, so on some

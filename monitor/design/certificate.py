@@ -20,9 +20,9 @@ import cvxpy as cp
 import numpy as np
 
 from monitor.model.delay_model import nominal_point
-from monitor.model.closed_loop import Gains, closed_loop, steady_state
+from monitor.model.closed_loop import Gains, LoopMatrices, closed_loop, steady_state
 from monitor.design.lmi_blocks import brl_margin
-from monitor.design.solve import EPS, Solved, SolveFailed, solve_checked
+from monitor.design.solve import EPS, Solved, SolveFailed, solve_checked, value_of
 from monitor.model.plant import Plant
 
 __all__ = ["Certificate", "CertificateLMI"]
@@ -39,7 +39,7 @@ class Certificate:
     solved: Solved
 
 
-def _brl_block(X, A, B, C: np.ndarray, g) -> cp.Constraint:
+def _brl_block(X: cp.Expression, A: np.ndarray, B: np.ndarray, C: np.ndarray, g: cp.Expression) -> cp.Constraint:
     """The discrete Bounded Real Lemma in its compact form, affine in X and g for fixed (A, B):
 
         [[A^T X A - X, A^T X B, C^T], [B^T X A, B^T X B - g I, 0], [C, 0, -I]] < 0.
@@ -58,7 +58,8 @@ def _brl_block(X, A, B, C: np.ndarray, g) -> cp.Constraint:
         [AXB.T, BXB - g * np.eye(nw), np.zeros((nw, k))],
         [C, np.zeros((k, nw)), -np.eye(k)],
     ])
-    return 0.5 * (block + block.T) << -EPS * np.eye(N + nw + k)
+    constraint: cp.Constraint = 0.5 * (block + block.T) << -EPS * np.eye(N + nw + k)
+    return constraint
 
 
 class CertificateLMI:
@@ -102,7 +103,7 @@ class CertificateLMI:
         return Certificate(gamma_e=float(np.sqrt(g_e)), gamma_z=float(np.sqrt(g_z)), P=P, Q=Q, solved=solved)
 
 
-def _common_bound(loops: list, C: np.ndarray) -> tuple[np.ndarray, float, Solved] | None:
+def _common_bound(loops: list[LoopMatrices], C: np.ndarray) -> tuple[np.ndarray, float, Solved] | None:
     """One X with the Bounded Real Lemma for output C at every vertex loop, smallest g: (X, g, how), or None."""
     N = loops[0].A.shape[0]
     X = cp.Variable((N, N), symmetric=True)
@@ -111,10 +112,10 @@ def _common_bound(loops: list, C: np.ndarray) -> tuple[np.ndarray, float, Solved
     problem = cp.Problem(cp.Minimize(g), [X >> EPS * np.eye(N)] + [_brl_block(X, loop.A, loop.B, C, g) for loop in loops])
 
     def claim() -> float:  # what verify re-checks: the bound at every vertex with this one X
-        return min(brl_margin(X.value, loop.A, loop.B, C, float(g.value)) for loop in loops)
+        return min(brl_margin(value_of(X), loop.A, loop.B, C, float(value_of(g))) for loop in loops)
 
     try:
         solved = solve_checked(problem, claim)
     except SolveFailed:
         return None
-    return X.value, float(g.value), solved
+    return value_of(X), float(value_of(g)), solved

@@ -23,6 +23,7 @@ around the inner problem, which is compiled once with cvxpy parameters and re-so
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cvxpy as cp
@@ -33,7 +34,7 @@ from monitor.model.closed_loop import Gains, closed_loop, fault_cancelling_K3, o
 from monitor.model.delay_model import b0_polytope, nominal_point
 from monitor.design.lmi_blocks import brl_margin, hinf_slack_lmi
 from monitor.design.result import DesignResult
-from monitor.design.solve import SEARCH_PATHS, Solved, SolveFailed, solve_checked
+from monitor.design.solve import SEARCH_PATHS, Solved, SolveFailed, solve_checked, value_of
 from monitor.errors import DesignFailed
 from monitor.model.plant import Plant
 
@@ -109,7 +110,7 @@ class ObserverLMI:
             B_p.value = loop.B
 
         def recovered() -> Gains:
-            LM = np.linalg.solve(self.G_o.value.T, self.W.value)
+            LM = np.linalg.solve(value_of(self.G_o).T, value_of(self.W))
             return Gains(L=LM[: plant.n], M=LM[plant.n :], K1=K1, K2=K2, K3=K3)
 
         def claim() -> float:  # the real loop with the recovered observer, at every vertex: both bounds
@@ -117,8 +118,8 @@ class ObserverLMI:
             worst = np.inf
             for v in self.vertices:
                 loop = closed_loop(plant, gains, v, steady=steady)
-                worst = min(worst, brl_margin(self.P.value, loop.A, loop.B, loop.C_ef, float(self.g_e.value)),
-                            brl_margin(self.Q.value, loop.A, loop.B, loop.C_y, float(self.g_z.value)))
+                worst = min(worst, brl_margin(value_of(self.P), loop.A, loop.B, loop.C_ef, float(value_of(self.g_e))),
+                            brl_margin(value_of(self.Q), loop.A, loop.B, loop.C_y, float(value_of(self.g_z))))
             return worst
 
         try:
@@ -130,10 +131,10 @@ class ObserverLMI:
             cost=float(self.problem.value),
             L=gains.L,
             M=gains.M,
-            P=self.P.value,
-            Q=self.Q.value,
-            gamma_e=float(np.sqrt(self.g_e.value)),
-            gamma_z=float(np.sqrt(self.g_z.value)),
+            P=value_of(self.P),
+            Q=value_of(self.Q),
+            gamma_e=float(np.sqrt(value_of(self.g_e))),
+            gamma_z=float(np.sqrt(value_of(self.g_z))),
             solved=solved,
         )
 
@@ -159,7 +160,7 @@ def design_certified(
     weight_y: float = 0.1,
     segments: int = 8,
     max_evaluations: int = 24,
-    progress=None,
+    progress: Callable[[int, float | None], None] | None = None,
     time_budget_s: float | None = None,
 ) -> DesignResult:
     """Jointly design L, M, K1, K2, K3 with a common-Lyapunov certificate over the whole delay interval.
@@ -195,10 +196,10 @@ def design_certified(
                 cache[key] = None
                 return INFEASIBLE * margin
             ts = time.perf_counter()
-            cache[key] = lmi.solve(K1, K2)
+            found = cache[key] = lmi.solve(K1, K2)
             solve_time[0] += time.perf_counter() - ts
             if progress is not None:
-                progress(len(cache), cache[key].gamma_e if cache[key] else None)
+                progress(len(cache), found.gamma_e if found else None)
         sol = cache[key]
         return sol.cost if sol is not None else INFEASIBLE
 
@@ -214,7 +215,8 @@ def design_certified(
         x_best = result.x
         stopped = False
     except _BudgetSpent:
-        x_best = np.array(min((k for k, c in cache.items() if c is not None), key=lambda k: cache[k].cost))
+        certified = [(k, c) for k, c in cache.items() if c is not None]
+        x_best = np.array(min(certified, key=lambda kc: kc[1].cost)[0])
         stopped = True
     best = cache.get(tuple(np.round(x_best, 10)))
     if best is None:

@@ -80,7 +80,7 @@ def deadbeat_observer(plant: Plant) -> tuple[np.ndarray, np.ndarray]:
     return LM[:n], LM[n:]
 
 
-def mismatch_energy(plant: Plant, gains: Gains, steady, horizon: int = 60) -> float:
+def mismatch_energy(plant: Plant, gains: Gains, steady: tuple[np.ndarray, np.ndarray], horizon: int = 60) -> float:
     """Energy of ``e_f`` from the third sample after a unit step fault on, worst of three delay patterns.
 
     Zero at the nominal delay for the deadbeat observer; what remains measures how much a delay other
@@ -103,7 +103,7 @@ def mismatch_energy(plant: Plant, gains: Gains, steady, horizon: int = 60) -> fl
     return worst
 
 
-def _loss_growth(plant: Plant, gains: Gains, steady, max_losses: int) -> float:
+def _loss_growth(plant: Plant, gains: Gains, steady: tuple[np.ndarray, np.ndarray], max_losses: int) -> float:
     """Worst per-sample growth of the macro-steps with up to ``max_losses`` losses, at the interval's ends.
 
     A lower bound of the switched loop's growth: the search's cheap guide; the certificate decides.
@@ -112,7 +112,7 @@ def _loss_growth(plant: Plant, gains: Gains, steady, max_losses: int) -> float:
     return float(macro_step_growth(plant, gains, ends, max_losses, steady).max())
 
 
-def _frozen_bounds(plant: Plant, gains: Gains, steady) -> tuple[float, float, float]:
+def _frozen_bounds(plant: Plant, gains: Gains, steady: tuple[np.ndarray, np.ndarray]) -> tuple[float, float, float]:
     """Worst frozen-delay H-infinity norms (e_f, y~) and spectral radius at three delays: the search's proxy."""
     ge = gz = rho = 0.0
     for t in (plant.tau_min, 0.5 * (plant.tau_min + plant.tau_max), plant.tau_max):

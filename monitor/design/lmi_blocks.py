@@ -17,7 +17,8 @@ from monitor.design.solve import EPS, most_positive_eigenvalue
 __all__ = ["hinf_slack_lmi", "brl_margin"]
 
 
-def hinf_slack_lmi(X, G, GA, GB, C: np.ndarray, g) -> cp.Constraint:
+def hinf_slack_lmi(X: cp.Expression, G: cp.Expression, GA: cp.Expression, GB: cp.Expression, C: np.ndarray,
+                   g: cp.Expression | float) -> cp.Constraint:
     """The constraint above, symmetrised explicitly (cvxpy wants a symmetric expression)."""
     N = C.shape[1]
     k = C.shape[0]
@@ -31,7 +32,8 @@ def hinf_slack_lmi(X, G, GA, GB, C: np.ndarray, g) -> cp.Constraint:
         ]
     )
     size = 2 * N + nw + k
-    return 0.5 * (block + block.T) << -EPS * np.eye(size)
+    constraint: cp.Constraint = 0.5 * (block + block.T) << -EPS * np.eye(size)
+    return constraint
 
 
 def brl_margin(X: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray, g: float) -> float:

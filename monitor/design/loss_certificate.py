@@ -18,7 +18,7 @@ import numpy as np
 from monitor.model.closed_loop import Gains, steady_state
 from monitor.model.delay_model import b0_polytope
 from monitor.design.result import DesignResult
-from monitor.design.solve import EPS, SolveFailed, most_positive_eigenvalue, solve_checked
+from monitor.design.solve import EPS, SolveFailed, most_positive_eigenvalue, solve_checked, value_of
 from monitor.errors import DesignFailed
 from monitor.model.loss_model import macro_steps
 from monitor.model.plant import Plant
@@ -48,7 +48,7 @@ def loss_certificate(plant: Plant, gains: Gains, vertices: list[np.ndarray], max
     problem = cp.Problem(cp.Minimize(t), constraints)
 
     def claim() -> float:  # every macro-step contracts ||xi||_P by CONTRACTION at least, with P >= I
-        candidate = P.value
+        candidate = value_of(P)
         return min(min(-most_positive_eigenvalue(S.T @ candidate @ S - CONTRACTION**2 * candidate) for S in steps),
                    -most_positive_eigenvalue(np.eye(N) - candidate) + EPS)
 
@@ -56,7 +56,7 @@ def loss_certificate(plant: Plant, gains: Gains, vertices: list[np.ndarray], max
         solve_checked(problem, claim)
     except SolveFailed:
         return None
-    candidate = 0.5 * (P.value + P.value.T)
+    candidate = 0.5 * (value_of(P) + value_of(P).T)
     return candidate if contraction(candidate, steps) < 1.0 else None
 
 

@@ -13,6 +13,7 @@ Every repair is marked ``REPAIR`` at the line where it applies.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import cvxpy as cp
 import numpy as np
@@ -20,7 +21,7 @@ import numpy as np
 from monitor.model.closed_loop import Gains
 from monitor.design.lmi_blocks import brl_margin, hinf_slack_lmi
 from monitor.design.result import DesignResult
-from monitor.design.solve import SolveFailed, solve_checked
+from monitor.design.solve import SolveFailed, solve_checked, value_of
 from monitor.errors import DesignFailed
 from monitor.model.plant import Plant
 
@@ -33,7 +34,7 @@ def lemma3_K2_K3(plant: Plant) -> tuple[np.ndarray, np.ndarray]:
     return -B0_pinv @ plant.B1, -B0_pinv @ plant.Df
 
 
-def design_paper(plant: Plant, weight_y: float = 0.1, **_ignored) -> DesignResult:
+def design_paper(plant: Plant, weight_y: float = 0.1, **_ignored: Any) -> DesignResult:
     """Theorem 1 (repaired): L, M, K1 from LMIs (16)/(17); K2, K3 from Lemma 3 as printed."""
     t0 = time.perf_counter()
     A, B0, C, Df, Dd = plant.A, plant.B0, plant.C, plant.Df, plant.Dd
@@ -79,14 +80,14 @@ def design_paper(plant: Plant, weight_y: float = 0.1, **_ignored) -> DesignResul
     K2, K3 = lemma3_K2_K3(plant)
 
     def recovered() -> Gains:
-        LM = np.linalg.solve(G23.value.T, Y.value)
-        return Gains(L=LM[:n], M=LM[n:], K1=np.linalg.solve(G1_hat.value, X.value), K2=K2, K3=K3)
+        LM = np.linalg.solve(value_of(G23).T, value_of(Y))
+        return Gains(L=LM[:n], M=LM[n:], K1=np.linalg.solve(value_of(G1_hat), value_of(X)), K2=K2, K3=K3)
 
     def claim() -> float:  # model (9) with the recovered L, M, K1: stable with both bounds
         g = recovered()
         A_bar = np.block([[A + B0 @ g.K1 @ C, Z((n, n)), Df], [Z((n, n)), A - g.L @ C, Df], [Z((q, n)), -g.M @ C, np.eye(q)]])
-        return min(brl_margin(P.value, A_bar, B_bar, C_f, float(g_e.value)),
-                   brl_margin(Q.value, A_bar, B_bar, C_bar, float(g_z.value)))
+        return min(brl_margin(value_of(P), A_bar, B_bar, C_f, float(value_of(g_e))),
+                   brl_margin(value_of(Q), A_bar, B_bar, C_bar, float(value_of(g_z))))
 
     t_build = time.perf_counter() - t0
     ts = time.perf_counter()
@@ -101,13 +102,13 @@ def design_paper(plant: Plant, weight_y: float = 0.1, **_ignored) -> DesignResul
     return DesignResult(
         method="paper",
         gains=gains,
-        gamma_e=float(np.sqrt(g_e.value)),
-        gamma_z=float(np.sqrt(g_z.value)),
+        gamma_e=float(np.sqrt(value_of(g_e))),
+        gamma_z=float(np.sqrt(value_of(g_z))),
         solved=solved,
         build_seconds=t_build,
         solve_seconds=t_solve,
         total_seconds=time.perf_counter() - t0,
-        certificate={"P": P.value, "Q": Q.value},
+        certificate={"P": value_of(P), "Q": value_of(Q)},
         bounds_apply_to="model (9) only (d_tau as an outside input, nominal tau); not the real loop",
         notes=[
             "Theorem 1 with repairs: full P, Q; G coupling e_x and e_f; -P_t/-Q_t on Psi's diagonal; "

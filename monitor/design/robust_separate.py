@@ -22,6 +22,7 @@ No common certificate is claimed: ``verify`` judges the real loop.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize
@@ -40,7 +41,8 @@ OBSERVER_MISMATCH_WEIGHT = 5.0
 CONTROLLER_INCREMENT_WEIGHT = 10.0
 
 
-def _controller_loop(plant: Plant, K1: np.ndarray, K2: np.ndarray, B0_tau: np.ndarray, weight: float):
+def _controller_loop(plant: Plant, K1: np.ndarray, K2: np.ndarray, B0_tau: np.ndarray,
+                     weight: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``[x; u(k-1)]`` at one delay with the fault known: A, B (from d), C (to [y; weight * increment])."""
     m, p = plant.m, plant.p
     B1_tau = plant.B0 + plant.B1 - B0_tau
@@ -76,7 +78,7 @@ def robust_controller_alone(plant: Plant, vertices: list[np.ndarray], weight: fl
     return K1, K2, float(res.fun)
 
 
-def design_robust_separate(plant: Plant, **_ignored) -> DesignResult:
+def design_robust_separate(plant: Plant, **_ignored: Any) -> DesignResult:
     t0 = time.perf_counter()
     vertices = b0_polytope(plant)
     mismatch = [OBSERVER_MISMATCH_WEIGHT * (v - plant.B0) for v in vertices]

@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import cvxpy as cp
 import numpy as np
@@ -20,7 +21,7 @@ from scipy.optimize import minimize
 from monitor.model.closed_loop import Gains, fault_cancelling_K3
 from monitor.design.lmi_blocks import brl_margin, hinf_slack_lmi
 from monitor.design.result import DesignResult
-from monitor.design.solve import Solved, SolveFailed, solve_checked
+from monitor.design.solve import Solved, SolveFailed, solve_checked, value_of
 from monitor.errors import DesignFailed
 from monitor.model.plant import Plant
 from monitor.model.norms import hinf_norm
@@ -49,18 +50,18 @@ def observer_alone(plant: Plant, extra_inputs: list[np.ndarray] | None = None,
     problem = cp.Problem(cp.Minimize(g), [*(hinf_slack_lmi(X, G, G.T @ A_o - Y @ C_o, G.T @ B, C_f, g) for B in inputs)])
 
     def recovered() -> np.ndarray:
-        return np.linalg.solve(G.value.T, Y.value)
+        return np.linalg.solve(value_of(G).T, value_of(Y))
 
     def claim() -> float:  # the error system with the recovered (L, M): stable, and ||w -> e_f|| <= sqrt(g)
         A_cl = A_o - recovered() @ C_o
-        return min(brl_margin(X.value, A_cl, B, C_f, float(g.value)) for B in inputs)
+        return min(brl_margin(value_of(X), A_cl, B, C_f, float(value_of(g))) for B in inputs)
 
     try:
         solved = solve_checked(problem, claim)
     except SolveFailed as exc:
         raise DesignFailed(f"{method} method, observer LMI: {exc}; no gains written") from None
     LM = recovered()
-    return LM[:n], LM[n:], float(np.sqrt(g.value)), solved
+    return LM[:n], LM[n:], float(np.sqrt(value_of(g))), solved
 
 
 def _controller_loop(plant: Plant, K1: np.ndarray, K2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -94,7 +95,7 @@ def controller_alone(plant: Plant, max_evaluations: int = 200) -> tuple[np.ndarr
     return K1, K2, float(res.fun)
 
 
-def design_separate(plant: Plant, **_ignored) -> DesignResult:
+def design_separate(plant: Plant, **_ignored: Any) -> DesignResult:
     t0 = time.perf_counter()
     L, M, gamma_e, solved = observer_alone(plant)
     t_obs = time.perf_counter() - t0

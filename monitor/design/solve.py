@@ -34,7 +34,7 @@ if TYPE_CHECKING:  # cvxpy costs about a second to import: only the solves load 
     import cvxpy as cp
 
 __all__ = ["EPS", "CHECK_MARGIN", "PATHS", "SEARCH_PATHS", "SolvePath", "Solved", "SolveFailed", "solve_checked",
-           "most_positive_eigenvalue"]
+           "most_positive_eigenvalue", "value_of"]
 
 EPS = 1e-6  # every strict LMI F < 0 is posed as F <= -EPS I
 CHECK_MARGIN = 0.5 * EPS  # the numpy check accepts F <= -CHECK_MARGIN I: half the posed strictness, far above rounding
@@ -102,6 +102,14 @@ class Solved:
     def describe(self) -> str:
         return (f"{self.path} ({self.status}); every LMI re-checked in numpy holds with margin {self.margin:.2e} "
                 f">= {CHECK_MARGIN:.0e}")
+
+
+def value_of(expr: cp.Expression) -> np.ndarray:
+    """``expr.value`` after a solve; TypeError when the solver left none (inside a claim: the point proves nothing)."""
+    value = expr.value
+    if value is None:
+        raise TypeError(f"{expr} has no value: the problem was not solved")
+    return value
 
 
 def most_positive_eigenvalue(M: np.ndarray) -> float:

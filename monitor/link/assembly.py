@@ -126,7 +126,7 @@ class SampleAssembler:
         # messages without a time field: message -> ((name, position, scale, offset, hold in us), ...)
         self._held_parts: dict[str, tuple[tuple[str, int, float, float, float], ...]] = {}
         for name, sig in signals.measured.items():
-            if not sig.timed:
+            if sig.hold is not None:  # not timed: a latest value
                 entry = (name, sig.position, sig.scale, sig.offset, sig.hold * 1e6)
                 self._held_parts[sig.message] = self._held_parts.get(sig.message, ()) + (entry,)
                 continue
@@ -335,16 +335,17 @@ class SampleAssembler:
         held = self._held
         for kk in sorted(x for x in self._pending if x <= k):
             slot = self._pending.pop(kk)
-            if not self._complete(slot):
+            time_usec = slot.time_usec
+            if time_usec is None or not self._complete(slot):
                 self._drop(slot)
                 continue
             values = slot.values
             if held:
                 for name in held:
-                    value = self._fresh(name, slot.time_usec)
+                    value = self._fresh(name, time_usec)
                     if value is not None:
                         values[name] = value
-            out.append(AssembledSample(kk, slot.time_usec, values, slot.route, now))
+            out.append(AssembledSample(kk, time_usec, values, slot.route, now))
         if out:
             self.counters.samples += len(out)
         self.last_k = k if self.last_k is None else max(self.last_k, k)

@@ -217,13 +217,13 @@ class DataFlashLog:
                         done = True
                         break
                     name = m.get_type()
-                    width, cols, instance_field, t_pos, unit_us = plan[name]
+                    width, columns, instance_field, t_pos, unit_us = plan[name]
                     if instance_field is not None:
                         inst = getattr(m, instance_field, None)
                         if first_instance.setdefault(name, inst) != inst:
                             continue
                     values: list[Any] = [0] * width
-                    for pos, col in cols:
+                    for pos, col in columns:
                         values[pos] = getattr(m, col)
                     chunk.append((name, tuple(values), int(values[t_pos]) * unit_us))
             self.records_read += len(chunk)

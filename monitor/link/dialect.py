@@ -16,7 +16,8 @@ from functools import lru_cache
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-__all__ = ["mavlink", "MessageLayout", "layout_by_id", "layout_by_name", "mavlink1_length", "TIME_FIELDS"]
+__all__ = ["mavlink", "MessageLayout", "layout_by_id", "layout_by_name", "known_layout", "mavlink1_length",
+           "TIME_FIELDS"]
 
 # The fields that can stamp a message with its sampling instant, in order of preference, and their unit in us.
 TIME_FIELDS: tuple[tuple[str, int], ...] = (("time_usec", 1), ("time_boot_ms", 1000))
@@ -97,6 +98,14 @@ def layout_by_id(msgid: int) -> MessageLayout | None:
 def layout_by_name(name: str) -> MessageLayout | None:
     cls = _BY_NAME.get(name.upper())
     return layout_by_id(cls.id) if cls is not None else None
+
+
+def known_layout(name: str) -> MessageLayout:
+    """``layout_by_name`` for a message the dialect defines (the monitor's own messages): KeyError otherwise."""
+    layout = layout_by_name(name)
+    if layout is None:
+        raise KeyError(f"the MAVLink dialect has no message {name}")
+    return layout
 
 
 @lru_cache(maxsize=None)

@@ -55,10 +55,11 @@ def log_spacing(path: str, instant: str, sysid: int | None, dataflash=None) -> f
         from monitor.link.tlog import read_tlog
 
         layout = layout_by_name(instant)
-        if layout is None or layout.time_field() is None:
+        stamp = layout.time_field() if layout is not None else None
+        if layout is None or stamp is None:
             return None
-        pos = layout.position(layout.time_field()[0])
-        unit = layout.time_field()[1]
+        pos = layout.position(stamp[0])
+        unit = stamp[1]
         parser = FrameParser(FrameCounters())
         for _t, frame in read_tlog(path):
             for msgid, sys_, _c, payload in parser.feed(frame):
@@ -116,7 +117,8 @@ def read_flight(path: str, smap, h: float, sysid: int | None = None,
     wanted = {}
     for name in {smap.instant, *(s.message for s in smap.measured.values())}:
         layout = layout_by_name(name)
-        wanted[layout.msgid] = (layout.name, layout)
+        if layout is not None:  # a MAVLink map (parse_signals checked its names): always found
+            wanted[layout.msgid] = (layout.name, layout)
     counters = FrameCounters()
     parser = FrameParser(counters)
     stats = TlogStats()

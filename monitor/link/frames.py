@@ -29,16 +29,20 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING
 
 from monitor.link.dialect import MessageLayout, layout_by_id, mavlink, mavlink1_length
 from monitor.link.signing import SIGNATURE_LEN, Signer
+
+if TYPE_CHECKING:
+    from typing_extensions import Buffer  # collections.abc.Buffer from Python 3.12
 
 __all__ = ["RawFrame", "FrameCounters", "FrameParser", "FrameEncoder", "crc16"]
 
 try:
     from fastcrc.crc16 import mcrf4xx as crc16
 except ImportError:  # pymavlink's own (slower, same result)
-    def crc16(data, initial: int | None = None) -> int:  # type: ignore[misc]
+    def crc16(data: Buffer, initial: int | None = None) -> int:
         crc = mavlink.x25crc()
         if initial is not None:
             crc.crc = initial

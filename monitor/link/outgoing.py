@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 
-from monitor.link.dialect import layout_by_name, mavlink
+from monitor.link.dialect import known_layout, mavlink
 from monitor.link.frames import FrameEncoder
 from monitor.link.signals import CommandMap
 
@@ -22,10 +22,10 @@ MONITOR_SYSID = 255  # a ground-station id, as MAVProxy uses; vehicles are 1-254
 MONITOR_COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 VEHICLE_COMPONENT = mavlink.MAV_COMP_ID_AUTOPILOT1
 
-_COMMAND = layout_by_name("SET_ACTUATOR_CONTROL_TARGET")
-_NAMED_FLOAT = layout_by_name("NAMED_VALUE_FLOAT")
-_STATUSTEXT = layout_by_name("STATUSTEXT")
-_HEARTBEAT = layout_by_name("HEARTBEAT")
+_COMMAND = known_layout("SET_ACTUATOR_CONTROL_TARGET")
+_NAMED_FLOAT = known_layout("NAMED_VALUE_FLOAT")
+_STATUSTEXT = known_layout("STATUSTEXT")
+_HEARTBEAT = known_layout("HEARTBEAT")
 _FLOAT32_MAX = 3.4028234663852886e38
 
 

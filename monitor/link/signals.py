@@ -283,7 +283,7 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int, layouts: Lay
     if unknown:
         raise UserError(f"{where}: unknown key '{unknown[0]}' (known: {', '.join(sorted(_TOP_KEYS))})")
     measured: dict[str, Signal] = {}
-    time_fields: dict[str, tuple[int, int]] = {}
+    time_fields: dict[str, tuple[int, int, int]] = {}
     table = raw.get("measured")
     if not isinstance(table, dict) or not table:
         raise UserError(f"{where}: needs a [signals.measured] table of name = {{ field = ... }}")

@@ -30,6 +30,7 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, cast
 
 from monitor.errors import UserError
 from monitor.link.frames import FrameCounters, FrameEncoder, FrameParser, RawFrame
@@ -79,10 +80,12 @@ def resolve(spec: ConnectionSpec) -> tuple[str, int]:
     try:
         infos = socket.getaddrinfo(spec.host, spec.port, type=socket.SOCK_DGRAM if spec.kind.startswith("udp")
                                    else socket.SOCK_STREAM)
-    except (socket.gaierror, UnicodeError) as exc:
+    except socket.gaierror as exc:
         raise UserError(f"--mavlink {spec}: cannot resolve host '{spec.host}' ({exc.strerror or exc})") from None
+    except UnicodeError as exc:  # a label IDNA cannot encode (empty, over 63 characters): no strerror
+        raise UserError(f"--mavlink {spec}: cannot resolve host '{spec.host}' ({exc})") from None
     addr = infos[0][4]
-    return addr[0], addr[1]
+    return str(addr[0]), int(addr[1])  # an AF_INET/AF_INET6 address: (host, port, ...)
 
 
 def is_loopback(host: str) -> bool:
@@ -209,6 +212,8 @@ class UdpLink(Link):
 
     def _readable(self) -> None:
         sock = self.sock
+        if sock is None:
+            return
         for _ in range(self.burst):
             try:
                 data, addr = sock.recvfrom(65535)
@@ -253,7 +258,8 @@ class UdpLink(Link):
             if self.remote is not None:
                 sock.send(data)
             else:
-                sock.sendto(data, peer)
+                # a datagram link's peers are the addresses recvfrom returned
+                sock.sendto(data, cast("tuple[Any, ...]", peer))
         except OSError as exc:  # a full buffer or an unreachable peer costs this frame only
             self.send_errors += 1
             log.debug("%s: send failed: %s", self.spec, exc)
@@ -284,7 +290,7 @@ class _Connection(asyncio.Protocol):
         self.closed = asyncio.get_running_loop().create_future()
         self.peer = "?"
 
-    def connection_made(self, transport) -> None:  # type: ignore[override]
+    def connection_made(self, transport) -> None:
         self.transport = transport
         self.peer = "%s:%s" % tuple(transport.get_extra_info("peername")[:2])
         self.link.connections.add(self)

@@ -92,7 +92,8 @@ def fault_cancelling_K3(plant: Plant, K2: np.ndarray) -> np.ndarray:
     G_u = plant.C @ resolvent[:, : plant.m]
     G_f = plant.C @ resolvent[:, plant.m :]
     u_per_f = -np.linalg.pinv(G_u) @ G_f
-    return (np.eye(plant.m) - K2) @ u_per_f
+    K3: np.ndarray = (np.eye(plant.m) - K2) @ u_per_f
+    return K3
 
 
 def observer_indices(plant: Plant) -> tuple[slice, slice, slice, slice]:

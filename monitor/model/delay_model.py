@@ -17,6 +17,7 @@ Lyapunov matrix that works at every vertex works for any sequence ``tau(k)``.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from functools import lru_cache
 
 import numpy as np
@@ -31,7 +32,8 @@ __all__ = ["b0_of_tau", "tau_grid", "b0_polytope", "curve_model", "input_sum", "
 
 def input_sum(plant: Plant) -> np.ndarray:
     """``B0(tau) + B1(tau)``: the same for every delay."""
-    return plant.B0 + plant.B1
+    total: np.ndarray = plant.B0 + plant.B1
+    return total
 
 
 @lru_cache(maxsize=32)
@@ -49,7 +51,7 @@ def _E(plant: Plant) -> np.ndarray:
 
 
 @lru_cache(maxsize=32)
-def lag_curve(base: Plant):
+def lag_curve(base: Plant) -> Callable[[float], np.ndarray]:
     """``a -> G(a)`` for ``a`` in ``[0, h]`` (``monitor.model.long_delay.curve_of``) of the exact or reconstructed model."""
     model = curve_model(base)
     return curve_of(model.A_c, model.B_c, base.h)
@@ -101,7 +103,8 @@ def _b0_of_tau(plant: Plant, tau: float) -> np.ndarray:
         return lag_point(lag_curve(plant.lags.base), plant.h, plant.tau_min, plant.tau_max, tau)
     if plant.continuous is not None:
         return b0_b1(plant.continuous, plant.h, tau)[0]
-    return plant.B0 + F_of_tau(curve_model(plant), plant.h, tau, plant.tau_bar) @ _E(plant)
+    b0: np.ndarray = plant.B0 + F_of_tau(curve_model(plant), plant.h, tau, plant.tau_bar) @ _E(plant)
+    return b0
 
 
 def tau_grid(plant: Plant, points: int = 201) -> np.ndarray:
@@ -118,7 +121,7 @@ def _second_derivative_bound(plant: Plant, lo: float, hi: float, A_c: np.ndarray
     or ``E`` (discrete); bounded on a fine grid with a 10 % margin for the gaps between grid points.
     """
     values = [np.linalg.norm(A_c @ integral_expm(A_c, plant.h - t)[0] @ B) for t in np.linspace(lo, hi, 101)]
-    return 1.1 * max(values)
+    return float(1.1 * max(values))
 
 
 def b0_polytope(plant: Plant, segments: int = 8) -> list[np.ndarray]:
@@ -144,7 +147,8 @@ def b0_polytope(plant: Plant, segments: int = 8) -> list[np.ndarray]:
     return [np.vstack(choice) for choice in itertools.product(*parts)]
 
 
-def _curve_polytope(plant: Plant, curve, lo: float, hi: float, A_c: np.ndarray, B: np.ndarray,
+def _curve_polytope(plant: Plant, curve: Callable[[float], np.ndarray], lo: float, hi: float, A_c: np.ndarray,
+                    B: np.ndarray,
                     segments: int) -> list[np.ndarray]:
     """The vertices for ``curve`` (``B0`` of a delay) over ``[lo, hi]``: chords blown up by their error bound."""
     taus = np.linspace(lo, hi, segments + 1)
@@ -174,7 +178,8 @@ def _oriented_box(cloud: np.ndarray) -> np.ndarray:
     if dim > 10:
         return cloud
     corners = np.array(np.meshgrid(*[(a, b) for a, b in zip(lo, hi)], indexing="ij")).reshape(dim, -1).T
-    return centre + corners @ axes
+    box: np.ndarray = centre + corners @ axes
+    return box
 
 
 def _oriented_prism(cloud: np.ndarray) -> np.ndarray:
@@ -206,7 +211,8 @@ def _prune(cloud: np.ndarray) -> np.ndarray:
     try:
         from scipy.spatial import ConvexHull
 
-        return cloud[ConvexHull(cloud).vertices]
+        hull: np.ndarray = cloud[ConvexHull(cloud).vertices]
+        return hull
     except Exception:  # degenerate (flat) clouds: keep every point, still a valid cover
         return cloud
 

@@ -91,7 +91,8 @@ def F_of_tau(model: ContinuousModel, h: float, tau: float, tau_bar: float) -> np
     """
     _, g_tau = integral_expm(model.A_c, h - tau)
     _, g_bar = integral_expm(model.A_c, h - tau_bar)
-    return g_tau - g_bar
+    F: np.ndarray = g_tau - g_bar
+    return F
 
 
 def delta_lemma1(A: np.ndarray, h: float, tau_min: float, tau_bar: float) -> float:
@@ -101,7 +102,8 @@ def delta_lemma1(A: np.ndarray, h: float, tau_min: float, tau_bar: float) -> flo
     comes from needs the continuous ``A_c``. Use ``delta_exact`` for a sound figure.
     """
     s = float(np.linalg.svd(A, compute_uv=False)[0])
-    return (np.exp(s * (h - tau_min)) - np.exp(s * (h - tau_bar))) / s
+    delta: float = (np.exp(s * (h - tau_min)) - np.exp(s * (h - tau_bar))) / s
+    return delta
 
 
 def delta_exact(model: ContinuousModel, h: float, tau_min: float, tau_max: float, tau_bar: float) -> float:
@@ -120,7 +122,8 @@ def delta_exact(model: ContinuousModel, h: float, tau_min: float, tau_max: float
     return max(values[i], -float(res.fun))
 
 
-def reconstruct_continuous(A: np.ndarray, Bsum: np.ndarray, Df: np.ndarray, Dd: np.ndarray, h: float):
+def reconstruct_continuous(A: np.ndarray, Bsum: np.ndarray, Df: np.ndarray, Dd: np.ndarray,
+                           h: float) -> ContinuousModel:
     """The continuous plant behind discrete matrices: ``A_c = logm(A)/h``, inputs from ``Gamma(h)^-1``.
 
     ``Bsum = B0 + B1`` is the zero-delay input matrix. Fails with a UserError when ``A`` has no real

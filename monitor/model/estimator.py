@@ -34,13 +34,18 @@ the unsaturated value would learn a fault that is not there.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from operator import mul
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from monitor.model.closed_loop import Gains
 from monitor.model.plant import Plant
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["EstimatorState", "StepResult", "Estimator", "report_pole"]
 
@@ -95,7 +100,7 @@ class Estimator:
     """
 
     def __init__(self, plant: Plant, gains: Gains, max_gap: int = 50, u_limit: float | None = None,
-                 u0=None, fault_time_constant: float | None = None) -> None:
+                 u0: ArrayLike | None = None, fault_time_constant: float | None = None) -> None:
         """``u0``: the operating point of the inputs when the plant works in deviations (``u`` here is
         ``u_abs - u0``): the actuator limit holds for the absolute deflection, so ``u`` is saturated to
         ``[-limit - u0, limit - u0]``. None: zero. ``fault_time_constant``: seconds of the low-pass on the
@@ -139,9 +144,11 @@ class Estimator:
         if self._bounds is None:
             return u
         lo, hi = np.array(self._bounds, dtype=float).T
-        return np.clip(np.asarray(u, dtype=float), lo, hi)
+        clipped: np.ndarray = np.clip(np.asarray(u, dtype=float), lo, hi)
+        return clipped
 
-    def _advance(self, s: EstimatorState, k: int, u_prev, applied: bool | None = None) -> list[float]:
+    def _advance(self, s: EstimatorState, k: int, u_prev: Iterable[float] | None,
+                 applied: bool | None = None) -> list[float]:
         """Predict over lost samples up to k, put the reported u(k-1) in; returns z as a list of floats.
 
         ``applied is False`` (the vehicle reports that the command for k-1 never acted): the last step
@@ -159,7 +166,7 @@ class Estimator:
             elif gap:
                 s.z = np.linalg.matrix_power(self._predict_T, gap) @ s.z
                 self._skipped = gap
-        z = s.z.tolist()
+        z: list[float] = s.z.tolist()
         if u_prev is not None and self.plant.lags is None:
             nq = self._nq
             held = [float(e) for e in u_prev]
@@ -201,7 +208,8 @@ class Estimator:
         return StepResult(k=k, u=np.array(u), x_hat=np.array(v[:self._n_reported]), f_hat=np.array(f_hat),
                           residual=np.array(out[nq:]), skipped=self._skipped, reset=reset)
 
-    def step(self, s: EstimatorState, k: int, y, u_prev=None, applied: bool | None = None) -> StepResult:
+    def step(self, s: EstimatorState, k: int, y: ArrayLike, u_prev: Iterable[float] | None = None,
+             applied: bool | None = None) -> StepResult:
         """Process sample k in place and return the command. Raises ValueError for a stale or duplicate k.
 
         ``u_prev``: the deflection the vehicle reports at k (None: the estimator's own last command);
@@ -214,7 +222,8 @@ class Estimator:
             u = [hi if e > hi else lo if e < lo else e for e, (lo, hi) in zip(u, bounds)]
         return self._finish(s, k, v, u)
 
-    def observe(self, s: EstimatorState, k: int, y, u_now, u_prev=None) -> StepResult:
+    def observe(self, s: EstimatorState, k: int, y: ArrayLike, u_now: ArrayLike,
+                u_prev: Iterable[float] | None = None) -> StepResult:
         """Observe-only: eq. (5) with the u(k) the vehicle's own controller issued (no command computed)."""
         v = self._advance(s, k, u_prev) + [float(e) for e in np.ravel(y)]
         return self._finish(s, k, v, [float(e) for e in np.ravel(u_now)])

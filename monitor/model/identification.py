@@ -165,7 +165,7 @@ class Identification:
 
     def report(self) -> dict[str, Any]:
         """A JSON-friendly summary (``fault-monitor identify --json``): strict JSON, a non-finite number is null."""
-        return finite_or_none({
+        report: dict[str, Any] = finite_or_none({
             "h": self.h,
             "states": list(self.state_names),
             "inputs": list(self.input_names),
@@ -184,6 +184,7 @@ class Identification:
             "disturbance": self.disturbance,
             "notes": list(self.notes),
         })
+        return report
 
 
 def finite_or_none(value: Any) -> Any:
@@ -281,7 +282,8 @@ def _lstsq(phi: np.ndarray, target: np.ndarray, names: list[str]) -> np.ndarray:
         raise IdentificationError(
             f"no excitation: the fitted samples do not tell {', '.join(n for n in names if n != '1')} apart "
             f"(regressor condition number {sv[0] / max(sv[-1], 1e-300):.3g}); fly a richer manoeuvre")
-    return theta / scale[:, None]
+    scaled: np.ndarray = theta / scale[:, None]
+    return scaled
 
 
 def _free_run_loop(A_d: np.ndarray, B_d: np.ndarray, x0: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -329,7 +331,7 @@ def _output_error(A_d: np.ndarray, B_d: np.ndarray, y: np.ndarray, u: np.ndarray
     sizes = (n * n, n * m, n, n if offset else 0)
     cuts = np.cumsum(sizes)
 
-    def unpack(p: np.ndarray):
+    def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         A, B = p[:cuts[0]].reshape(n, n), p[cuts[0]:cuts[1]].reshape(n, m)
         x0, d = p[cuts[1]:cuts[2]], (p[cuts[2]:cuts[3]] if offset else np.zeros(n))
         return A, B, x0, d
@@ -338,7 +340,8 @@ def _output_error(A_d: np.ndarray, B_d: np.ndarray, y: np.ndarray, u: np.ndarray
         A, B, x0, d = unpack(p)
         with np.errstate(all="ignore"):
             r = ((yp - d - simulate(A, B, x0, u)[present]) / scale).ravel()
-        return np.nan_to_num(r, nan=1e6, posinf=1e6, neginf=-1e6)
+        finite: np.ndarray = np.nan_to_num(r, nan=1e6, posinf=1e6, neginf=-1e6)
+        return finite
 
     first = int(np.argmax(present))
     p0 = np.concatenate([A_d.ravel(), B_d.ravel(), y[first] if first == 0 else np.zeros(n), np.zeros(sizes[3])])
@@ -393,8 +396,9 @@ def _continuous(A_d: np.ndarray, B_d: np.ndarray, h: float) -> tuple[np.ndarray,
         raise IdentificationError(f"no continuous model: {exc}") from None
     A_c, B_c = model.A_c, model.B_c
     A_back, gamma = integral_expm(A_c, h)
-    if (not np.all(np.isfinite(A_c)) or np.linalg.norm(A_back - A_d) > 1e-8 * max(1.0, np.linalg.norm(A_d))
-            or np.linalg.norm(gamma @ B_c - B_d) > 1e-8 * max(1.0, np.linalg.norm(B_d))):
+    if (not np.all(np.isfinite(A_c))
+            or np.linalg.norm(A_back - A_d) > 1e-8 * max(1.0, float(np.linalg.norm(A_d)))
+            or np.linalg.norm(gamma @ B_c - B_d) > 1e-8 * max(1.0, float(np.linalg.norm(B_d)))):
         raise IdentificationError("no continuous model: the matrix logarithm of the fitted discrete A does not "
                                   "give it back (ill-conditioned fit); fly a richer manoeuvre")
     return A_c, B_c, A_back, gamma
@@ -491,8 +495,9 @@ def identify(data: FlightData, holdout: float = HOLDOUT) -> Identification:
             notes.append(f"the refined model was refused ({failure}); the least-squares model is kept")
         A_d, B_d, op_x = A_try, B_try, op_x + offset
         break
-    else:
-        raise failure  # type: ignore[misc]
+    else:  # every candidate was refused (there is at least one): failure holds the first refusal
+        assert failure is not None
+        raise failure
     if np.max(np.abs(np.angle(np.linalg.eigvals(A_d)))) > 0.5 * math.pi:
         notes.append(f"a mode rotates more than a quarter turn per sample (h = {h:g} s): its frequency is near "
                      "Nyquist and poorly resolved")

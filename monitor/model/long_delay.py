@@ -30,6 +30,7 @@ command every difference term vanishes), which is what keeps the loop's deviatio
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -41,12 +42,13 @@ __all__ = ["lag_span", "lag_intervals", "lag_point", "lag_realization", "lagged_
 MAX_LAG_PARTS = 3
 
 
-def curve_of(A_c: np.ndarray, B_c: np.ndarray, h: float):
+def curve_of(A_c: np.ndarray, B_c: np.ndarray, h: float) -> Callable[[float], np.ndarray]:
     """``a -> G(a) = int_a^h e^{A_c (h - s)} ds B_c`` for ``a`` in ``[0, h]``: the ``B0`` of a delay ``a``."""
     from monitor.model.discretize import integral_expm
 
     def curve(a: float) -> np.ndarray:
-        return integral_expm(A_c, h - float(a))[1] @ B_c
+        G: np.ndarray = integral_expm(A_c, h - float(a))[1] @ B_c
+        return G
 
     return curve
 
@@ -72,7 +74,8 @@ def lag_intervals(h: float, tau_min: float, tau_max: float) -> list[tuple[float,
     return [(clip(tau_min - j * h), clip(tau_max - j * h)) for j in range(first, last + 1)]
 
 
-def lag_point(curve, h: float, tau_min: float, tau_max: float, tau: float) -> np.ndarray:
+def lag_point(curve: Callable[[float], np.ndarray], h: float, tau_min: float, tau_max: float,
+              tau: float) -> np.ndarray:
     """The stacked ``[G(a_first); ...; G(a_last)]`` of a *constant* delay ``tau`` (``a_j = clip(tau - j h)``).
 
     ``curve(a)`` is ``G(a)``. A constant delay is one admissible pattern among many; the polytope holds all.
@@ -93,7 +96,7 @@ def lag_realization(point: np.ndarray, A: np.ndarray, G0: np.ndarray, first: int
     zero = np.zeros((n, m))
 
     def coefficient(j: int) -> np.ndarray:  # of u(k-j) in x(k+1)
-        c = parts.get(j, zero) - parts.get(j - 1, zero)
+        c: np.ndarray = parts.get(j, zero) - parts.get(j - 1, zero)
         return c + G0 if j == last + 1 else c
 
     n_a = n + m * last

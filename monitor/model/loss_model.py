@@ -106,4 +106,5 @@ def macro_step_growth(plant: Plant, gains: Gains, b0_points: list[np.ndarray], m
     steps = np.array(macro_steps(plant, gains, b0_points, max_losses, steady))
     samples = np.array([len(seq) + 1 for seq in loss_sequences(max_losses)])
     radii = np.max(np.abs(np.linalg.eigvals(steps)), axis=-1).reshape(len(b0_points), len(samples))
-    return radii ** (1.0 / samples)
+    growth: np.ndarray = radii ** (1.0 / samples)
+    return growth

@@ -27,12 +27,14 @@ def norm_factor(P: np.ndarray | None) -> np.ndarray | None:
 
 def induced_norms(R: np.ndarray, mats: np.ndarray) -> np.ndarray:
     """``||M||_P = ||R M R^-1||_2`` for each matrix of ``mats`` (shape ``(..., N, N)``)."""
-    return np.linalg.norm(R @ np.asarray(mats) @ np.linalg.inv(R), 2, axis=(-2, -1))
+    norms: np.ndarray = np.linalg.norm(R @ np.asarray(mats) @ np.linalg.inv(R), 2, axis=(-2, -1))
+    return norms
 
 
 def dual_norms(rows: np.ndarray, R: np.ndarray) -> np.ndarray:
     """``||r||_* = sqrt(r P^-1 r')``, the dual of ``||x||_P``, row by row: ``|r x| <= ||r||_* ||x||_P``."""
-    return np.linalg.norm(np.linalg.solve(R.T, np.atleast_2d(rows).T), axis=0)
+    norms: np.ndarray = np.linalg.norm(np.linalg.solve(R.T, np.atleast_2d(rows).T), axis=0)
+    return norms
 
 
 def contraction(P: np.ndarray, steps: list[np.ndarray], depth: int = 1) -> float:
@@ -46,7 +48,8 @@ def contraction(P: np.ndarray, steps: list[np.ndarray], depth: int = 1) -> float
     mats = np.array(steps)
     if depth == 2:
         mats = np.einsum("iab,jbc->ijac", mats, mats).reshape(-1, *mats.shape[1:])
-    return float(np.max(induced_norms(R, mats))) ** (1.0 / depth)
+    factor: float = float(np.max(induced_norms(R, mats))) ** (1.0 / depth)
+    return factor
 
 
 def hinf_norm(A: np.ndarray, B: np.ndarray, C: np.ndarray, points: int = 2048) -> float:
@@ -95,13 +98,16 @@ def hinf_norms(A: np.ndarray, B: np.ndarray, outputs: list[np.ndarray], points: 
         G = np.tensordot(C, R, axes=(1, 0)).transpose(1, 0, 2)  # (frequencies, outputs, inputs)
         if G.shape[1] < G.shape[2]:
             G = G.conj().transpose(0, 2, 1)  # same singular values, fewer columns
+        sigma: np.ndarray
         if G.shape[2] == 1:
-            return np.sqrt(np.sum(np.abs(G[:, :, 0]) ** 2, axis=1))
+            sigma = np.sqrt(np.sum(np.abs(G[:, :, 0]) ** 2, axis=1))
+            return sigma
         if G.shape[2] == 2:  # the largest eigenvalue of the 2 x 2 Gram matrix G^H G
             a = np.sum(np.abs(G[:, :, 0]) ** 2, axis=1)
             d = np.sum(np.abs(G[:, :, 1]) ** 2, axis=1)
             b = np.sum(G[:, :, 0].conj() * G[:, :, 1], axis=1)
-            return np.sqrt(0.5 * (a + d) + np.sqrt(0.25 * (a - d) ** 2 + np.abs(b) ** 2))
+            sigma = np.sqrt(0.5 * (a + d) + np.sqrt(0.25 * (a - d) ** 2 + np.abs(b) ** 2))
+            return sigma
         return np.linalg.svd(G, compute_uv=False)[:, 0]
 
     omegas = np.concatenate([np.linspace(0.0, np.pi, points), np.geomspace(1e-5, 1e-1, 200)])

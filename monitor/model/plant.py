@@ -112,23 +112,23 @@ class Plant:
 
     @property
     def n(self) -> int:
-        return self.A.shape[0]
+        return int(self.A.shape[0])
 
     @property
     def m(self) -> int:
-        return self.B0.shape[1]
+        return int(self.B0.shape[1])
 
     @property
     def l(self) -> int:  # noqa: E743 - the paper's name for the output dimension
-        return self.C.shape[0]
+        return int(self.C.shape[0])
 
     @property
     def q(self) -> int:
-        return self.Df.shape[1]
+        return int(self.Df.shape[1])
 
     @property
     def p(self) -> int:
-        return self.Dd.shape[1]
+        return int(self.Dd.shape[1])
 
 
 @dataclass(frozen=True, eq=False)

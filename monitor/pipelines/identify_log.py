@@ -340,6 +340,7 @@ def _measure_air(req: IdentifyRequest, kept, k, X, U, states, sysid: int):
                               kept.h)
     if gust is None:
         raise UserError(f"{req.log}: too few consecutive samples (or no alpha) to measure the gust")
+    assert req.air_only is not None  # kept is the --air-only plant
     text = Path(req.air_only).read_text("utf-8")
     kept_lines, skipping = [], False
     for line in text.splitlines():  # every line but the old [disturbance] table's

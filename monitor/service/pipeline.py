@@ -79,7 +79,7 @@ class Pipeline:
                     self._wanted[layout.msgid] = (layout.name, layout)
 
     # --- hot path ------------------------------------------------------------------------------------
-    def on_frames(self, route: object, frames: list[RawFrame], t0_ns: int, now: float | None = None,
+    def on_frames(self, route: tuple | None, frames: list[RawFrame], t0_ns: int, now: float | None = None,
                   wall: float | None = None) -> None:
         """Frames of one read. On a datagram link at most one sample per vehicle is processed per datagram
         and at most ``MAX_FRAMES_PER_DATAGRAM`` frames are looked at: one packet must not buy many answers."""
@@ -195,8 +195,8 @@ class Pipeline:
     def summary(self) -> str:
         c = self.counts()
         p50, p99 = percentile(self.processing_s, 50), percentile(self.processing_s, 99)
-        timing = (f"processing p50 {p50 * 1e6:.0f} us, p99 {p99 * 1e6:.0f} us" if p50 is not None
-                  else "no processing times")
+        timing = (f"processing p50 {p50 * 1e6:.0f} us, p99 {p99 * 1e6:.0f} us"
+                  if p50 is not None and p99 is not None else "no processing times")
         order = ("processed", "duplicates", "stale", "incomplete", "held_missing", "late_parts", "waited_out",
                  "no_report", "not_applied", "rejected_values", "future", "foreign_source", "excess", "frames_v1",
                  "garbage", "truncated", "bad_signature", "v1_refused", "wrong_dialect", "foreign", "refused", "skipped", "vehicles_seen",

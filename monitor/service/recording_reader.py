@@ -172,13 +172,13 @@ def _assemble(cls: type, sysid: int, columns: list[_Column]) -> list[Any]:
     n = keys.size
     ks = np.zeros(n, np.int64)
     for c in columns:
-        ks[np.searchsorted(keys, c.wall if by_wall else c.k)] = c.k
+        ks[np.searchsorted(keys, c.wall if by_wall and c.wall is not None else c.k)] = c.k
     per_row: dict[str, list[Any]] = {"sysid": [sysid] * n, "k": ks.tolist()}
     t, wall = np.full(n, math.nan), np.full(n, math.nan)
     scalars: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     vectors: dict[str, dict[int, np.ndarray]] = {}
     for c in columns:
-        pos = np.searchsorted(keys, c.wall if by_wall else c.k)
+        pos = np.searchsorted(keys, c.wall if by_wall and c.wall is not None else c.k)
         t[pos] = c.t
         if c.wall is not None:
             wall[pos] = c.wall
@@ -235,7 +235,9 @@ def load_recording(path: str | Path) -> Recording:
             continue
         match = _VEHICLE_RE.match(entity)
         where = _locate(match.group(2)) if match else None
-        column = _column(chunk, *where[1:]) if where else None
+        if match is None or where is None:
+            continue
+        column = _column(chunk, *where[1:])
         if column is not None and column.k.size:
             columns.setdefault((where[0], int(match.group(1))), []).append(column)
     if not columns and not properties:

@@ -17,7 +17,8 @@ __all__ = ["SampleRecord", "TruthRecord"]
 class SampleRecord:
     """Everything the monitor knows about one processed sample of one vehicle.
 
-    Units: angles in degrees (``alpha``, ``elevator``), rates in deg/s (``q``), times in seconds.
+    Units: angles in degrees (``alpha``, ``elevator``), rates in deg/s (``q``), times in seconds. ``alpha``,
+    ``q`` and ``elevator`` are None when the vehicle's signal map has no such signal (a row not recorded).
     ``t`` is the sampling instant stamped by the vehicle (MAVLink ``time_usec``), ``wall`` the monitor's
     receive time (Unix epoch). ``y``, ``x_hat``, ``f_hat``, ``u`` and ``residual`` are in plant units.
     """
@@ -27,8 +28,8 @@ class SampleRecord:
     t: float
     wall: float
     y: list[float]
-    alpha: float
-    q: float
+    alpha: float | None
+    q: float | None
     elevator: float | None
     x_hat: list[float]
     f_hat: list[float]

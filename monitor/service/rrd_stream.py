@@ -17,7 +17,7 @@ import platform
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 from importlib import metadata
 
 import numpy as np
@@ -128,6 +128,7 @@ def default_blueprint(sysids: Iterable[int]):  # -> rerun.blueprint.Blueprint
         )
 
     ids = sorted(sysids)
+    root: rrb.Container | rrb.View
     if not ids:
         root = rrb.TimeSeriesView(origin="/vehicle", name="all series")
     elif len(ids) == 1:
@@ -195,8 +196,9 @@ def _record_batch(sysid: int, records: Sequence[SampleRecord | TruthRecord],
     t_ns = np.round(np.array([r.t for r in records], dtype=float) * 1e9).astype(np.int64)
     arrays = [pa.array(k), pa.array(t_ns, pa.duration("ns"))]
     fields = [pa.field("sample", pa.int64()), pa.field("time", pa.duration("ns"))]
-    if wall:
-        w_ns = np.round(np.array([r.wall for r in records], dtype=float) * 1e9).astype(np.int64)
+    if wall:  # sample records: only they carry the receive time
+        samples = cast("Sequence[SampleRecord]", records)
+        w_ns = np.round(np.array([r.wall for r in samples], dtype=float) * 1e9).astype(np.int64)
         arrays.append(pa.array(w_ns, pa.timestamp("ns")))
         fields.append(pa.field("wall_time", pa.timestamp("ns")))
     offsets = pa.array(np.arange(n + 1, dtype=np.int32))
@@ -227,7 +229,8 @@ def open_stream(application_id: str, recording_id: str, properties: dict[str, st
 
     rec = rr.RecordingStream(application_id, recording_id=recording_id)
     attach(rec)
-    rec.send_property(PROPERTY_NAME, rr.AnyValues(**{k: str(v) for k, v in properties.items()}))
+    rec.send_property(PROPERTY_NAME, rr.AnyValues(drop_untyped_nones=True,
+                                                  **{k: str(v) for k, v in properties.items()}))
     rec.send_recording_name(recording_name)
     return rec
 

@@ -262,6 +262,7 @@ class VehicleTable:
         applied = None
         if self.observe:
             # u(k) issued by the vehicle is in this sample's report; u(k-1) stays from the previous one
+            assert u_report is not None  # observe mode: a sample is complete only with its actuator report
             result = est.observe(vehicle.state, sample.k, y, u_report)
             u_abs = [values[name] for name in sig.actuator]
         else:

@@ -95,6 +95,13 @@ class FaultEvent:
     def active(self, k: int) -> bool:
         return k >= self.start and (self.end is None or k < self.end)
 
+    @property
+    def amount(self) -> float:
+        """``value`` of a term that carries one (bias, ramp, loe: the parser requires it)."""
+        if self.value is None:
+            raise ValueError(f"a {self.kind} term without a value")
+        return float(self.value)
+
     def __str__(self) -> str:
         value = "" if self.value is None else f":{self.value:g}"
         end = "" if self.end is None else f"-{self.end}"
@@ -119,9 +126,9 @@ class FaultSchedule:
             if not ev.active(k):
                 continue
             if ev.kind == "bias":
-                total += float(ev.value)  # type: ignore[arg-type]
+                total += ev.amount
             elif ev.kind == "ramp":
-                total += float(ev.value) * (k - ev.start)  # type: ignore[operator]
+                total += ev.amount * (k - ev.start)
         return total
 
     def f_vector(self, k: int, q: int = 1) -> list[float]:
@@ -130,7 +137,7 @@ class FaultSchedule:
 
     def effectiveness(self, k: int) -> float:
         """Elevator effectiveness at sample ``k`` (1 = healthy), the product of the active ``loe`` terms."""
-        return math.prod(float(ev.value) for ev in self.events if ev.kind == "loe" and ev.active(k))  # type: ignore[arg-type]
+        return math.prod(ev.amount for ev in self.events if ev.kind == "loe" and ev.active(k))
 
     def stuck(self, k: int) -> FaultEvent | None:
         """The ``stuck`` term holding the elevator at sample ``k`` (earliest start wins), or None."""
@@ -190,7 +197,7 @@ def _parse_fault_term(term: str, spec: str) -> FaultEvent:
         raise fail(f"value in '{term}' is not finite")
     if value is None and kind != "stuck":
         raise fail(f"'{kind}' needs a value, as in {kind}:VALUE@START")
-    if kind == "loe" and not 0.0 <= value <= 1.0:  # type: ignore[operator]
+    if kind == "loe" and value is not None and not 0.0 <= value <= 1.0:
         raise fail(f"loe effectiveness must be in [0, 1], got {value:g}")
     start = int(match["start"])
     end = int(match["end"]) if match["end"] is not None else None
