@@ -9,7 +9,24 @@ plant, design, verify, simulate, read a recording. Everything else may move betw
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # what an editor and mypy see; at run time ``__getattr__`` below imports them on first use
+    from monitor.api import DesignResult as DesignResult
+    from monitor.api import Gains as Gains
+    from monitor.api import Plant as Plant
+    from monitor.api import SimulatedRun as SimulatedRun
+    from monitor.api import Verdict as Verdict
+    from monitor.api import check_gains as check_gains
+    from monitor.api import check_losses as check_losses
+    from monitor.api import design_gains as design_gains
+    from monitor.api import load_plant as load_plant
+    from monitor.api import plant_from_arrays as plant_from_arrays
+    from monitor.api import plant_from_statespace as plant_from_statespace
+    from monitor.api import read_gains as read_gains
+    from monitor.api import read_recording as read_recording
+    from monitor.api import report as report
+    from monitor.api import simulate as simulate
 
 __version__ = "0.1.0"
 
