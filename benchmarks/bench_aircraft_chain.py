@@ -30,11 +30,11 @@ def _progress(text: str, final: bool = False) -> None:
 def run_one(name: str, airspeed: float, rate: float, work: Path, margin: bool) -> None:
     from monitor.checks.threshold import fault_threshold
     from monitor.checks.verify import verify_gains
-    from monitor.pipelines.identify_log import IdentifyRequest, identify_log
     from monitor.demo.aircraft import record_identification_flight
     from monitor.demo.live import Aircraft
     from monitor.design import run_design
     from monitor.model.plant import load_plant
+    from monitor.pipelines.identify_log import IdentifyRequest, identify_log
 
     altitude = 3000.0 if airspeed < 200 else 10000.0
     craft = Aircraft(name=name, airspeed=airspeed, altitude=altitude, rate=rate)
@@ -57,16 +57,21 @@ def run_one(name: str, airspeed: float, rate: float, work: Path, margin: bool) -
     bound = fault_threshold(plant, result.gains, 1.0)
     t_threshold = time.perf_counter() - t
     fit = min(done.result.fit_validation.values())
-    print(f"{name:<6} {rate:>4g} Hz  fit >= {fit:5.1f} %  flight {t_flight:5.1f} s  identify {t_ident:4.1f} s  "
-          f"design {t_design:5.1f} s ({result.objective}, gamma_e {result.gamma_e:.3f})  "
-          f"verify {'stable' if v.stable else 'UNSTABLE'} rho {v.rho_max:.3f} cert {v.certificate_valid}  "
-          f"threshold {bound.per_unit_disturbance:.4g}/|d| ({t_threshold:.1f} s)", flush=True)
+    print(
+        f"{name:<6} {rate:>4g} Hz  fit >= {fit:5.1f} %  flight {t_flight:5.1f} s  identify {t_ident:4.1f} s  "
+        f"design {t_design:5.1f} s ({result.objective}, gamma_e {result.gamma_e:.3f})  "
+        f"verify {'stable' if v.stable else 'UNSTABLE'} rho {v.rho_max:.3f} cert {v.certificate_valid}  "
+        f"threshold {bound.per_unit_disturbance:.4g}/|d| ({t_threshold:.1f} s)",
+        flush=True,
+    )
     if margin:
         from monitor.checks.margin import delay_margin
 
         t = time.perf_counter()
         m = delay_margin(plant, tolerance=plant.h / 20, curve_points=2, objective="fast")
-        print(f"       margin tau_max {m.tau_max:.4f} s = {m.tau_max / plant.h:.2f} h ({time.perf_counter() - t:.1f} s)")
+        print(
+            f"       margin tau_max {m.tau_max:.4f} s = {m.tau_max / plant.h:.2f} h ({time.perf_counter() - t:.1f} s)"
+        )
 
 
 def main() -> None:

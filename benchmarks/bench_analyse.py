@@ -37,9 +37,11 @@ def write_log(path: Path, minutes: float) -> int:
         for k in range(n):
             t_us = k * h_us
             u = -0.2 * (0.5 + 0.01 * (k % 7))
-            msgs = [mavlink.MAVLink_attitude_message(t_us // 1000, 0, 0, 0, 0, 0.01, 0),
-                    mavlink.MAVLink_aoa_ssa_message(t_us, 0.5 + 0.01 * (k % 7), 0.0),
-                    mavlink.MAVLink_actuator_output_status_message(t_us, 1, [u] + [0.0] * 31)]
+            msgs = [
+                mavlink.MAVLink_attitude_message(t_us // 1000, 0, 0, 0, 0, 0.01, 0),
+                mavlink.MAVLink_aoa_ssa_message(t_us, 0.5 + 0.01 * (k % 7), 0.0),
+                mavlink.MAVLink_actuator_output_status_message(t_us, 1, [u] + [0.0] * 31),
+            ]
             if k % 50 == 0:
                 msgs.append(mavlink.MAVLink_heartbeat_message(1, 3, 0, 0, 4, 3))
             for i, msg in enumerate(msgs):
@@ -57,17 +59,36 @@ def main() -> None:
     log = work / "flight.tlog"
     t = time.perf_counter()
     n = write_log(log, args.minutes)
-    print(f"wrote {n} samples ({args.minutes:g} min at 50 Hz, {log.stat().st_size / 1e6:.1f} MB) in "
-          f"{time.perf_counter() - t:.1f} s")
+    print(
+        f"wrote {n} samples ({args.minutes:g} min at 50 Hz, {log.stat().st_size / 1e6:.1f} MB) in "
+        f"{time.perf_counter() - t:.1f} s"
+    )
     env = {**os.environ, "RERUN_ANALYTICS": "0"}
     for extra in ([], ["--rrd", str(work / "flight.rrd")]):
         t = time.perf_counter()
-        out = subprocess.run([sys.executable, "-m", "monitor", "analyse", str(log), "--plant", str(plant), "--gains",
-                              str(gains), *extra], capture_output=True, text=True, env=env, cwd=REPO)
+        out = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "monitor",
+                "analyse",
+                str(log),
+                "--plant",
+                str(plant),
+                "--gains",
+                str(gains),
+                *extra,
+            ],
+            capture_output=True,
+            text=True,
+            env=env,
+            cwd=REPO,
+        )
         elapsed = time.perf_counter() - t
         last = out.stdout.strip().splitlines()[-1] if out.stdout.strip() else out.stderr[-300:]
-        print(f"analyse {' '.join(extra) or '(no recording)':40s}: {elapsed:5.1f} s wall, exit {out.returncode}; "
-              f"{last}")
+        print(
+            f"analyse {' '.join(extra) or '(no recording)':40s}: {elapsed:5.1f} s wall, exit {out.returncode}; {last}"
+        )
 
 
 if __name__ == "__main__":

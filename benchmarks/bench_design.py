@@ -18,7 +18,6 @@ IMPORT_S = time.perf_counter() - t0
 from monitor.design import run_design  # noqa: E402
 from monitor.model.plant import load_plant  # noqa: E402
 
-
 DESIGNS = (
     ("certified (fast)", "certified", {}),
     ("certified (hinf)", "certified", {"objective": "hinf"}),
@@ -42,8 +41,10 @@ def main(repeats: int = 3) -> None:
                     r = run_design(method, plant, **options)
                 if best is None or r.total_seconds < best.total_seconds:
                     best = r
-            print(f"{preset:<18}{label:<24}{best.build_seconds:>9.3f}{best.solve_seconds:>9.3f}"
-                  f"{best.total_seconds:>9.3f}{best.gamma_e:>9.4f}")
+            print(
+                f"{preset:<18}{label:<24}{best.build_seconds:>9.3f}{best.solve_seconds:>9.3f}"
+                f"{best.total_seconds:>9.3f}{best.gamma_e:>9.4f}"
+            )
 
 
 if __name__ == "__main__":

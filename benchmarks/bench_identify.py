@@ -31,9 +31,9 @@ def in_process(log: Path) -> tuple[float, float, int]:
 
     import numpy as np
 
-    from monitor.pipelines.identify_log import IDENTIFY_SIGNALS_TOML, map_for
     from monitor.link.flight_log import log_spacing, read_flight
     from monitor.model.identification import MODELS, FlightData, identify
+    from monitor.pipelines.identify_log import IDENTIFY_SIGNALS_TOML, map_for
 
     states = MODELS["longitudinal"]
     smap, _written = map_for(tomllib.loads(IDENTIFY_SIGNALS_TOML)["signals"], "default", states)
@@ -64,8 +64,12 @@ def main() -> None:
         walls, report = [], {}
         for _ in range(args.repeat):
             t = time.perf_counter()
-            proc = subprocess.run([sys.executable, "-m", "monitor", "identify", str(log), "--out",
-                                   str(work / "plant.toml"), "--json"], capture_output=True, text=True, cwd=REPO)
+            proc = subprocess.run(
+                [sys.executable, "-m", "monitor", "identify", str(log), "--out", str(work / "plant.toml"), "--json"],
+                capture_output=True,
+                text=True,
+                cwd=REPO,
+            )
             walls.append(time.perf_counter() - t)
             if proc.returncode != 0:
                 sys.exit(f"identify failed: {proc.stderr.strip()}")
@@ -77,12 +81,18 @@ def main() -> None:
             fits.append(t_fit)
         fit = ", ".join(f"{s} {f:.1f} %" for s, f in report["fit_percent"].items())
         modes = "; ".join(f"{m['name']} wn {m['wn_rad_s']:.3f} zeta {m['zeta']:.3f}" for m in report["modes"])
-        print(f"{minutes:g} min flight ({samples} samples, {report['log']['records']} records, "
-              f"{log.stat().st_size / 1e6:.1f} MB; flown and logged in {made:.1f} s)")
-        print(f"  fault-monitor identify, whole command: median {statistics.median(walls):.2f} s "
-              f"(runs: {', '.join(f'{w:.2f}' for w in walls)})")
-        print(f"  in process: reading the log {statistics.median(reads):.3f} s, identification "
-              f"{statistics.median(fits):.3f} s")
+        print(
+            f"{minutes:g} min flight ({samples} samples, {report['log']['records']} records, "
+            f"{log.stat().st_size / 1e6:.1f} MB; flown and logged in {made:.1f} s)"
+        )
+        print(
+            f"  fault-monitor identify, whole command: median {statistics.median(walls):.2f} s "
+            f"(runs: {', '.join(f'{w:.2f}' for w in walls)})"
+        )
+        print(
+            f"  in process: reading the log {statistics.median(reads):.3f} s, identification "
+            f"{statistics.median(fits):.3f} s"
+        )
         print(f"  held-out fit: {fit}; {modes}")
 
 

@@ -70,7 +70,7 @@ def daemon(steps: int, rate: float, work: Path) -> tuple[float, int]:
         while not stop.is_set():
             try:
                 data = rx.recv(65535)
-            except socket.timeout:
+            except TimeoutError:
                 continue
             for msg in codec.parse_buffer(data) or []:
                 if msg.get_type() == "AOA_SSA":
@@ -78,9 +78,29 @@ def daemon(steps: int, rate: float, work: Path) -> tuple[float, int]:
 
     thread = threading.Thread(target=listen, daemon=True)
     thread.start()
-    cmd = [sys.executable, "-m", "sim_vehicle", "run", "--aircraft", "c172p", "--rate", f"{rate:g}", "--steps",
-           str(steps), "--speedup", "1e5", "--no-zenoh", "--mavlink", f"udpout:127.0.0.1:{port}",
-           "--truth-jsonl", str(work / "truth.jsonl"), "--turbulence", "light", "--log-level", "WARNING"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "sim_vehicle",
+        "run",
+        "--aircraft",
+        "c172p",
+        "--rate",
+        f"{rate:g}",
+        "--steps",
+        str(steps),
+        "--speedup",
+        "1e5",
+        "--no-zenoh",
+        "--mavlink",
+        f"udpout:127.0.0.1:{port}",
+        "--truth-jsonl",
+        str(work / "truth.jsonl"),
+        "--turbulence",
+        "light",
+        "--log-level",
+        "WARNING",
+    ]
     t = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO, env={**os.environ, "RERUN_ANALYTICS": "0"})
     wall = time.perf_counter() - t
@@ -100,16 +120,22 @@ def main() -> None:
     args = parser.parse_args()
     steps = int(round(args.minutes * 60 * args.rate))
     work = Path(tempfile.mkdtemp(prefix="bench-jsbsim-"))
-    print(f"c172p, {args.minutes:g} simulated minutes at {args.rate:g} Hz: {steps} samples, "
-          f"{steps * round(120 / args.rate)} JSBSim steps")
+    print(
+        f"c172p, {args.minutes:g} simulated minutes at {args.rate:g} Hz: {steps} samples, "
+        f"{steps * round(120 / args.rate)} JSBSim steps"
+    )
     for turbulence in ("none", "light"):
         load, fly = in_process(steps, args.rate, turbulence)
-        print(f"  in process, turbulence {turbulence:5s}: load + trim {load * 1e3:.0f} ms, flight {fly:.2f} s "
-              f"({steps / fly:,.0f} samples/s, {steps * 60 / args.rate / 60 / fly:.0f}x real time)")
+        print(
+            f"  in process, turbulence {turbulence:5s}: load + trim {load * 1e3:.0f} ms, flight {fly:.2f} s "
+            f"({steps / fly:,.0f} samples/s, {steps * 60 / args.rate / 60 / fly:.0f}x real time)"
+        )
     wall, received = daemon(steps, args.rate, work)
-    print(f"  daemon (sim-vehicle run ... --speedup 1e5, light turbulence, truth to JSONL, UDP to a listener): "
-          f"{wall:.2f} s wall incl. start-up, {received}/{steps} samples received "
-          f"({args.minutes * 60 / wall:.0f}x real time; target: well under 60 s)")
+    print(
+        f"  daemon (sim-vehicle run ... --speedup 1e5, light turbulence, truth to JSONL, UDP to a listener): "
+        f"{wall:.2f} s wall incl. start-up, {received}/{steps} samples received "
+        f"({args.minutes * 60 / wall:.0f}x real time; target: well under 60 s)"
+    )
 
 
 if __name__ == "__main__":

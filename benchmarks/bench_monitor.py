@@ -68,9 +68,9 @@ def bench_plant(directory: Path) -> tuple[Path, Path]:
     """paper-continuous at 50 Hz and deadbeat observer gains for it (files in ``directory``)."""
     import numpy as np
 
-    from monitor.model.closed_loop import Gains
     from monitor.design.result import DesignResult
     from monitor.gains import write_gains
+    from monitor.model.closed_loop import Gains
     from monitor.model.plant import load_plant, parse_plant
 
     text = (REPO / "monitor/presets/paper-continuous.toml").read_text()
@@ -81,11 +81,15 @@ def bench_plant(directory: Path) -> tuple[Path, Path]:
     p = parse_plant(text, str(plant_path))
     # the load generator's y answers no command, so an observer would chase a phantom fault: L = M = 0 keeps
     # the state bounded; the cost per sample does not depend on the values
-    gains = Gains(L=np.zeros((2, 1)), M=np.zeros((1, 1)), K1=np.array([[-0.2]]), K2=np.zeros((1, 1)),
-                  K3=np.zeros((1, 1)))
+    gains = Gains(
+        L=np.zeros((2, 1)), M=np.zeros((1, 1)), K1=np.array([[-0.2]]), K2=np.zeros((1, 1)), K3=np.zeros((1, 1))
+    )
     gains_path = directory / "gains-50hz.toml"
-    write_gains(gains_path, DesignResult("bench", gains, gamma_e=0.0, gamma_z=0.0, build_seconds=0, solve_seconds=0,
-                                         total_seconds=0), p)
+    write_gains(
+        gains_path,
+        DesignResult("bench", gains, gamma_e=0.0, gamma_z=0.0, build_seconds=0, solve_seconds=0, total_seconds=0),
+        p,
+    )
     assert load_plant(plant_path).h == H
     return plant_path, gains_path
 
@@ -99,9 +103,11 @@ def sample_frames(sysid: int, n: int) -> list[list[bytes]]:
     for k in range(n):
         t_us = k * int(H * 1e6)
         frames = []
-        for msg in (mavlink.MAVLink_attitude_message(t_us // 1000, 0, 0, 0, 0, 0.01, 0),
-                    mavlink.MAVLink_aoa_ssa_message(t_us, 0.5 + 0.01 * (k % 7), 0.0),
-                    mavlink.MAVLink_actuator_output_status_message(t_us, 1, [0.1] + [0.0] * 31)):
+        for msg in (
+            mavlink.MAVLink_attitude_message(t_us // 1000, 0, 0, 0, 0, 0.01, 0),
+            mavlink.MAVLink_aoa_ssa_message(t_us, 0.5 + 0.01 * (k % 7), 0.0),
+            mavlink.MAVLink_actuator_output_status_message(t_us, 1, [0.1] + [0.0] * 31),
+        ):
             codec.send(msg)
             frames.append(codec.file.take())
         out.append(frames)
@@ -118,10 +124,31 @@ def start_server(kind: str, port: int, plant: Path, gains: Path, log_path: str) 
     if kind == "echo":
         cmd = [sys.executable, "-c", ECHO_SERVER, str(port)]
     else:
-        cmd = [sys.executable, "-m", "monitor", "--log-level", "WARNING", "run", "--plant", str(plant), "--gains",
-               str(gains), "--mavlink", f"udpin:127.0.0.1:{port}", "--vehicle-timeout", "60", "--no-truth"]
-    proc = subprocess.Popen(cmd, stdout=open(log_path, "wb"), stderr=subprocess.STDOUT, cwd=REPO,
-                            start_new_session=True, env={**os.environ, "RERUN_ANALYTICS": "0"})
+        cmd = [
+            sys.executable,
+            "-m",
+            "monitor",
+            "--log-level",
+            "WARNING",
+            "run",
+            "--plant",
+            str(plant),
+            "--gains",
+            str(gains),
+            "--mavlink",
+            f"udpin:127.0.0.1:{port}",
+            "--vehicle-timeout",
+            "60",
+            "--no-truth",
+        ]
+    proc = subprocess.Popen(
+        cmd,
+        stdout=open(log_path, "wb"),
+        stderr=subprocess.STDOUT,
+        cwd=REPO,
+        start_new_session=True,
+        env={**os.environ, "RERUN_ANALYTICS": "0"},
+    )
     time.sleep(2.5 if kind == "monitor" else 0.5)  # imports, Zenoh session
     return proc
 
@@ -218,8 +245,8 @@ def pct(values: list[float], p: float) -> float:
 def inprocess(plant: Path, gains: Path, n: int = 20_000) -> None:
     from monitor.link.frames import FrameParser
     from monitor.service.daemon import MonitorConfig, build_pipeline
-    from monitor.service.publisher import EstimatePublisher
     from monitor.service.fleet_file import Fleet, load_model
+    from monitor.service.publisher import EstimatePublisher
     from monitor.wire.zenoh_session import build_config, close_quietly, open_session
 
     class NullLink:
@@ -239,8 +266,9 @@ def inprocess(plant: Path, gains: Path, n: int = 20_000) -> None:
     try:
         for framing in ("packed", "one message per datagram"):
             data = sample_frames(1, n)
-            pipeline = build_pipeline(MonitorConfig(fleet=Fleet(load_model(plant, gains)), connections=[]),
-                                      publisher=publisher)
+            pipeline = build_pipeline(
+                MonitorConfig(fleet=Fleet(load_model(plant, gains)), connections=[]), publisher=publisher
+            )
             parser = FrameParser(pipeline.frames)
             route = (NullLink(), ("127.0.0.1", 9))
             times = []
@@ -253,8 +281,10 @@ def inprocess(plant: Path, gains: Path, n: int = 20_000) -> None:
                         pipeline.on_frames(route, frames, t0)
                 times.append(time.perf_counter_ns() - t0)
             times.sort()
-            print(f"  in-process per sample, {framing:25s}: p50 {times[n // 2] / 1e3:6.1f} us   "
-                  f"p99 {times[int(n * 0.99)] / 1e3:6.1f} us   ({pipeline.table.counters.processed} processed)")
+            print(
+                f"  in-process per sample, {framing:25s}: p50 {times[n // 2] / 1e3:6.1f} us   "
+                f"p99 {times[int(n * 0.99)] / 1e3:6.1f} us   ({pipeline.table.counters.processed} processed)"
+            )
     finally:
         close_quietly(session, *publisher.close())
 
@@ -264,8 +294,11 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0, help="length of each paced run (default: 10)")
     parser.add_argument("--skip-inprocess", action="store_true")
     parser.add_argument("--flood", action="store_true", help="only the flood run")
-    parser.add_argument("--reuse", action="store_true",
-                        help="only: one monitor serves 10 vehicles, then at once 100 (ids 1-10 again, from new ports)")
+    parser.add_argument(
+        "--reuse",
+        action="store_true",
+        help="only: one monitor serves 10 vehicles, then at once 100 (ids 1-10 again, from new ports)",
+    )
     args = parser.parse_args()
     os.environ.setdefault("RERUN_ANALYTICS", "0")
     workdir = Path(tempfile.mkdtemp(prefix="bench-monitor-"))
@@ -273,15 +306,18 @@ def main() -> None:
     if args.flood:
         port = _free_udp_port()
         proc = start_server("monitor", port, plant, gains, str(workdir / "monitor.log"))
-        flooder = subprocess.Popen([sys.executable, "-c", FLOODER, str(port), "2000", str(args.seconds + 1)],
-                                   stdout=subprocess.PIPE, text=True)
+        flooder = subprocess.Popen(
+            [sys.executable, "-c", FLOODER, str(port), "2000", str(args.seconds + 1)], stdout=subprocess.PIPE, text=True
+        )
         try:
             rtts, sent, answered = drive(port, 10, args.seconds, "one message per datagram")
         finally:
             junk = flooder.communicate(timeout=args.seconds + 30)[0].strip()
             stop_server(proc)
-        print(f"  flood of {junk} junk datagrams from fresh ports at 2,000/s: 10 x 50 Hz answered {answered}/{sent} "
-              f"({answered / sent:.2%}), round trip p50 {pct(rtts, 50):.0f} us p99 {pct(rtts, 99):.0f} us")
+        print(
+            f"  flood of {junk} junk datagrams from fresh ports at 2,000/s: 10 x 50 Hz answered {answered}/{sent} "
+            f"({answered / sent:.2%}), round trip p50 {pct(rtts, 50):.0f} us p99 {pct(rtts, 99):.0f} us"
+        )
         return
     if args.reuse:  # a load generator restarted at once: its vehicles come back from new ports, k from 0 again
         port = _free_udp_port()
@@ -289,8 +325,10 @@ def main() -> None:
         try:
             for vehicles in (10, 100):
                 rtts, sent, answered = drive(port, vehicles, args.seconds, "one message per datagram")
-                print(f"  {vehicles:3d} x 50 Hz on the same monitor: answered {answered}/{sent} ({answered / sent:.2%}), "
-                      f"round trip p50 {pct(rtts, 50):.0f} us (target >= 99 %)")
+                print(
+                    f"  {vehicles:3d} x 50 Hz on the same monitor: answered {answered}/{sent} ({answered / sent:.2%}), "
+                    f"round trip p50 {pct(rtts, 50):.0f} us (target >= 99 %)"
+                )
         finally:
             stop_server(proc)
         summary = [line for line in (workdir / "monitor.log").read_text().splitlines() if "stopped:" in line]
@@ -309,12 +347,19 @@ def main() -> None:
                 finally:
                     stop_server(proc)
                 rtts, sent, answered = results[kind, framing, vehicles]
-                print(f"  {vehicles:3d} x 50 Hz, {framing:25s} {kind:8s}: round trip p50 {pct(rtts, 50):7.0f} us  "
-                      f"p99 {pct(rtts, 99):7.0f} us   answered {answered}/{sent} ({answered / sent:.2%})")
+                print(
+                    f"  {vehicles:3d} x 50 Hz, {framing:25s} {kind:8s}: round trip p50 {pct(rtts, 50):7.0f} us  "
+                    f"p99 {pct(rtts, 99):7.0f} us   answered {answered}/{sent} ({answered / sent:.2%})"
+                )
             echo, mon = results["echo", framing, vehicles][0], results["monitor", framing, vehicles][0]
-            print(f"      -> monitor / echo p50 = {pct(mon, 50) / pct(echo, 50):.2f}x"
-                  + ("   (target <= 1.5x on one message per datagram)" if vehicles == 10 else
-                     "   (target: monitor answers >= 99 %)"))
+            print(
+                f"      -> monitor / echo p50 = {pct(mon, 50) / pct(echo, 50):.2f}x"
+                + (
+                    "   (target <= 1.5x on one message per datagram)"
+                    if vehicles == 10
+                    else "   (target: monitor answers >= 99 %)"
+                )
+            )
     summary = [line for line in (workdir / "monitor.log").read_text().splitlines() if "stopped:" in line]
     if summary:
         print("  last monitor summary:", summary[-1].split("stopped: ", 1)[1])

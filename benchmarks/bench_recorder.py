@@ -33,8 +33,25 @@ def samples(n: int, vehicles: int) -> list[SampleRecord]:
     out = []
     for i in range(n):
         k, sysid = divmod(i, vehicles)
-        out.append(SampleRecord(sysid + 1, k, 0.01 * k, time.time(), [0.1, 0.2], 0.1, 0.2, 0.3, [1.0, 2.0], [0.5],
-                                [0.3], [0.01, 0.02], 0.2, 5e-5, False))
+        out.append(
+            SampleRecord(
+                sysid + 1,
+                k,
+                0.01 * k,
+                time.time(),
+                [0.1, 0.2],
+                0.1,
+                0.2,
+                0.3,
+                [1.0, 2.0],
+                [0.5],
+                [0.3],
+                [0.01, 0.02],
+                0.2,
+                5e-5,
+                False,
+            )
+        )
     return out
 
 
@@ -55,7 +72,7 @@ def writer_cost(path: Path, recs: list[SampleRecord], batch: int) -> float:
     rec = RrdRecorder(path, batch_size=10**9, max_age_s=1e9)  # the thread never flushes: we drain by hand
     spent = 0.0
     for start in range(0, len(recs), batch):
-        for r in recs[start:start + batch]:
+        for r in recs[start : start + batch]:
             rec.submit(r)
         t0 = time.perf_counter()
         rec._drain()  # noqa: SLF001 - measuring the writer's step on its own
@@ -95,19 +112,26 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         costs, close_s = burst(Path(tmp) / "burst.rrd", recs)
         size = (Path(tmp) / "burst.rrd").stat().st_size
-        loop = {"without": paced(None, recs, args.rate), "with": paced(Path(tmp) / "paced.rrd", recs, args.rate)} \
-            if args.rate else {}
+        loop = (
+            {"without": paced(None, recs, args.rate), "with": paced(Path(tmp) / "paced.rrd", recs, args.rate)}
+            if args.rate
+            else {}
+        )
         writer = {b: writer_cost(Path(tmp) / f"writer{b}.rrd", recs, b * args.vehicles) for b in (64, 256, 1024)}
     p50, p99 = np.percentile(costs, [50, 99])
     print(f"rerun-sdk recorder, {args.samples} samples over {args.vehicles} vehicle(s), 14 scalars/sample")
     print(f"submit   p50 {p50:.2f} us  p99 {p99:.2f} us  max {costs.max():.0f} us  (writer thread flushing behind)")
     for b, cost in writer.items():
-        print(f"writer   {cost * 1e6:.1f} us/sample in the background, {b} samples/vehicle a flush "
-              f"({1 / cost:,.0f} samples/s)")
+        print(
+            f"writer   {cost * 1e6:.1f} us/sample in the background, {b} samples/vehicle a flush "
+            f"({1 / cost:,.0f} samples/s)"
+        )
     for label, c in loop.items():
         q50, q99 = np.percentile(c, [50, 99])
-        print(f"paced    {args.rate:,.0f}/s {label:>7} recorder: step p50 {q50:.1f} us  p99 {q99:.1f} us  "
-              f"max {c.max():.0f} us")
+        print(
+            f"paced    {args.rate:,.0f}/s {label:>7} recorder: step p50 {q50:.1f} us  p99 {q99:.1f} us  "
+            f"max {c.max():.0f} us"
+        )
     print(f"close    {close_s * 1e3:.1f} ms (rest of the buffer, blueprint, footer); file {size / 1e6:.2f} MB")
 
 

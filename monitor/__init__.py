@@ -30,9 +30,23 @@ if TYPE_CHECKING:  # what an editor and mypy see; at run time ``__getattr__`` be
 
 __version__ = "0.1.0"
 
-_API = ("Gains", "Plant", "DesignResult", "Verdict", "SimulatedRun", "load_plant", "plant_from_arrays",
-        "plant_from_statespace", "design_gains", "check_gains", "check_losses", "simulate", "read_gains",
-        "read_recording", "report")
+_API = (
+    "Gains",
+    "Plant",
+    "DesignResult",
+    "Verdict",
+    "SimulatedRun",
+    "load_plant",
+    "plant_from_arrays",
+    "plant_from_statespace",
+    "design_gains",
+    "check_gains",
+    "check_losses",
+    "simulate",
+    "read_gains",
+    "read_recording",
+    "report",
+)
 
 __all__ = ["__version__", *_API]
 

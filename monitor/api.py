@@ -25,26 +25,41 @@ recording written by ``run``, ``analyse`` or ``demo`` is read back with ``read_r
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from monitor.model.closed_loop import Gains
+from monitor.checks.verify import Verdict
 from monitor.design.result import DesignResult
 from monitor.errors import UserError
+from monitor.model.closed_loop import Gains
 from monitor.model.plant import Plant, load_plant, plant_from_table
 from monitor.model.simulate import Trace
-from monitor.checks.verify import Verdict
 
 if TYPE_CHECKING:  # at run time imported by the functions that return them, as the rest of this module does
     from monitor.checks.verify_losses import LossVerdict
     from monitor.service.recording_reader import Recording
 
-__all__ = ["Gains", "Plant", "DesignResult", "Verdict", "SimulatedRun", "load_plant", "plant_from_arrays",
-           "plant_from_statespace", "design_gains", "check_gains", "check_losses", "simulate", "read_gains",
-           "read_recording", "report"]
+__all__ = [
+    "Gains",
+    "Plant",
+    "DesignResult",
+    "Verdict",
+    "SimulatedRun",
+    "load_plant",
+    "plant_from_arrays",
+    "plant_from_statespace",
+    "design_gains",
+    "check_gains",
+    "check_losses",
+    "simulate",
+    "read_gains",
+    "read_recording",
+    "report",
+]
 
 ArrayLike = Any  # anything numpy.asarray takes: nested lists, numpy arrays
 
@@ -54,10 +69,24 @@ def _rows(a: ArrayLike) -> list[list[float]]:
     return rows
 
 
-def plant_from_arrays(*, h: float, tau_max: float, tau_min: float = 0.0, C: ArrayLike, A_c: ArrayLike = None,
-                      B_c: ArrayLike = None, D_cf: ArrayLike = None, D_cd: ArrayLike = None, A: ArrayLike = None,
-                      B0: ArrayLike = None, B1: ArrayLike = None, Df: ArrayLike = None, Dd: ArrayLike = None,
-                      name: str = "notebook", actuator_limit: float | None = None) -> Plant:
+def plant_from_arrays(
+    *,
+    h: float,
+    tau_max: float,
+    tau_min: float = 0.0,
+    C: ArrayLike,
+    A_c: ArrayLike = None,
+    B_c: ArrayLike = None,
+    D_cf: ArrayLike = None,
+    D_cd: ArrayLike = None,
+    A: ArrayLike = None,
+    B0: ArrayLike = None,
+    B1: ArrayLike = None,
+    Df: ArrayLike = None,
+    Dd: ArrayLike = None,
+    name: str = "notebook",
+    actuator_limit: float | None = None,
+) -> Plant:
     """A plant from matrices, validated exactly like a plant file (the same one-line errors).
 
     Continuous form: ``A_c, B_c, D_cf, D_cd, C`` (the simulator's kind of plant); discrete form: ``A, B0, B1,
@@ -76,8 +105,13 @@ def plant_from_arrays(*, h: float, tau_max: float, tau_min: float = 0.0, C: Arra
     ...
     monitor.errors.UserError: notebook: keys 'tau_min'/'tau_max' must satisfy 0 <= tau_min <= tau_max (got 0.5, 0.3)
     """
-    table: dict[str, Any] = {"name": name, "h": float(h), "tau_min": float(tau_min), "tau_max": float(tau_max),
-                             "C": _rows(C)}
+    table: dict[str, Any] = {
+        "name": name,
+        "h": float(h),
+        "tau_min": float(tau_min),
+        "tau_max": float(tau_max),
+        "C": _rows(C),
+    }
     continuous = {"A_c": A_c, "B_c": B_c, "D_cf": D_cf, "D_cd": D_cd}
     discrete = {"A": A, "B0": B0, "B1": B1, "Df": Df, "Dd": Dd}
     if all(v is not None for v in continuous.values()) and all(v is None for v in discrete.values()):
@@ -85,16 +119,27 @@ def plant_from_arrays(*, h: float, tau_max: float, tau_min: float = 0.0, C: Arra
     elif all(v is not None for v in discrete.values()) and all(v is None for v in continuous.values()):
         table.update(form="discrete", **{k: _rows(v) for k, v in discrete.items()})
     else:
-        raise UserError(f"{name}: give either all of A_c, B_c, D_cf, D_cd (continuous) or all of A, B0, B1, Df, Dd "
-                        "(discrete), not a mix")
+        raise UserError(
+            f"{name}: give either all of A_c, B_c, D_cf, D_cd (continuous) or all of A, B0, B1, Df, Dd "
+            "(discrete), not a mix"
+        )
     if actuator_limit is not None:
         table["actuator"] = {"limit": float(actuator_limit)}
     return plant_from_table(table, name)
 
 
-def plant_from_statespace(sys: Any, *, h: float, tau_max: float, tau_min: float = 0.0, control: Sequence[int] = (0,),
-                          fault: Sequence[int] = (1,), disturbance: Sequence[int] = (2,), name: str = "statespace",
-                          actuator_limit: float | None = None) -> Plant:
+def plant_from_statespace(
+    sys: Any,
+    *,
+    h: float,
+    tau_max: float,
+    tau_min: float = 0.0,
+    control: Sequence[int] = (0,),
+    fault: Sequence[int] = (1,),
+    disturbance: Sequence[int] = (2,),
+    name: str = "statespace",
+    actuator_limit: float | None = None,
+) -> Plant:
     """A continuous plant from a python-control ``StateSpace`` whose inputs are [controls, faults, disturbances].
 
     ``control``, ``fault`` and ``disturbance`` pick the input columns; ``sys.C`` is the measured output and
@@ -108,20 +153,32 @@ def plant_from_statespace(sys: Any, *, h: float, tau_max: float, tau_min: float 
     """
     A, B, C, D = (np.atleast_2d(np.asarray(getattr(sys, k), dtype=float)) for k in ("A", "B", "C", "D"))
     if getattr(sys, "dt", 0) not in (0, None):
-        raise UserError(f"{name}: a continuous-time StateSpace is needed (dt = 0), got dt = {sys.dt}; "
-                        "for a discrete model use plant_from_arrays(A=..., B0=..., B1=..., ...)")
+        raise UserError(
+            f"{name}: a continuous-time StateSpace is needed (dt = 0), got dt = {sys.dt}; "
+            "for a discrete model use plant_from_arrays(A=..., B0=..., B1=..., ...)"
+        )
     if np.any(D != 0):
         raise UserError(f"{name}: the StateSpace has a feedthrough D != 0, which the method does not model")
     for label, cols in (("control", control), ("fault", fault), ("disturbance", disturbance)):
         if not cols or any(not 0 <= c < B.shape[1] for c in cols):
             raise UserError(f"{name}: {label} columns {list(cols)} are not input columns of B (it has {B.shape[1]})")
-    return plant_from_arrays(h=h, tau_min=tau_min, tau_max=tau_max, A_c=A, B_c=B[:, list(control)],
-                             D_cf=B[:, list(fault)], D_cd=B[:, list(disturbance)], C=C, name=name,
-                             actuator_limit=actuator_limit)
+    return plant_from_arrays(
+        h=h,
+        tau_min=tau_min,
+        tau_max=tau_max,
+        A_c=A,
+        B_c=B[:, list(control)],
+        D_cf=B[:, list(fault)],
+        D_cd=B[:, list(disturbance)],
+        C=C,
+        name=name,
+        actuator_limit=actuator_limit,
+    )
 
 
-def design_gains(plant: Plant, method: str = "certified", objective: str | None = None, max_losses: int = 0,
-           **options: Any) -> DesignResult:
+def design_gains(
+    plant: Plant, method: str = "certified", objective: str | None = None, max_losses: int = 0, **options: Any
+) -> DesignResult:
     """``fault-monitor design`` without the file: gains, the bounds claimed and the certificate.
 
     ``method``: certified (default), paper, separate, robust-separate; ``objective`` (certified only):
@@ -154,8 +211,7 @@ def check_gains(plant: Plant, gains: Gains, result: DesignResult | None = None) 
     return verify_gains(plant, gains, result.certificate or None, result.gamma_e, result.gamma_z)
 
 
-def check_losses(plant: Plant, gains: Gains, max_losses: int,
-                 result: DesignResult | None = None) -> LossVerdict:
+def check_losses(plant: Plant, gains: Gains, max_losses: int, result: DesignResult | None = None) -> LossVerdict:
     """``verify --max-losses N``'s loss verdict (``stable`` True only with a proof; see monitor.checks.verify_losses)."""
     from monitor.checks.verify_losses import verify_losses
 
@@ -171,8 +227,16 @@ class SimulatedRun(Trace):
     peak_alpha_after: float | None = None
 
 
-def simulate(plant: Plant, gains: Gains, steps: int = 100, fault: str = "bias:2@20", delay: str | None = None,
-             wind: str = "paper", seed: int = 0, rrd: str | Path | None = None) -> SimulatedRun:
+def simulate(
+    plant: Plant,
+    gains: Gains,
+    steps: int = 100,
+    fault: str = "bias:2@20",
+    delay: str | None = None,
+    wind: str = "paper",
+    seed: int = 0,
+    rrd: str | Path | None = None,
+) -> SimulatedRun:
     """Simulate plant + observer + controller (no network) with the contract's fault/delay/wind SPECs.
 
     ``delay`` defaults to uniform over the plant's interval. The same model as ``demo --runs``: the exact
@@ -189,16 +253,20 @@ def simulate(plant: Plant, gains: Gains, steps: int = 100, fault: str = "bias:2@
 
     delay_spec = delay or f"uniform:{plant.tau_min}:{plant.tau_max}"
     scenario = f"fault {fault}, delay {delay_spec}, wind {wind}, seed {seed}, {steps} samples"
-    recording = (simulated_recording(rrd, plant, gains, "given to simulate", scenario)
-                 if rrd is not None else nullcontext(None))
+    recording = (
+        simulated_recording(rrd, plant, gains, "given to simulate", scenario) if rrd is not None else nullcontext(None)
+    )
     with recording as on_sample:
         schedule = parse_fault_spec(fault)
         wind_values = parse_wind_spec(wind, plant.h, seed).values()
-        trace = simulate_loop(plant, gains, steps, schedule, parse_delay_spec(delay_spec, seed), wind_values,
-                              on_sample)
+        trace = simulate_loop(plant, gains, steps, schedule, parse_delay_spec(delay_spec, seed), wind_values, on_sample)
     sc = score_run(trace, schedule)
-    return SimulatedRun(**{f.name: getattr(trace, f.name) for f in fields(Trace)}, settling_steps=sc.settling_steps,
-                        rms_ef=sc.rms_ef, peak_alpha_after=sc.peak_alpha_after)
+    return SimulatedRun(
+        **{f.name: getattr(trace, f.name) for f in fields(Trace)},
+        settling_steps=sc.settling_steps,
+        rms_ef=sc.rms_ef,
+        peak_alpha_after=sc.peak_alpha_after,
+    )
 
 
 def read_gains(path: str | Path) -> Gains:

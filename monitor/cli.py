@@ -16,8 +16,20 @@ from monitor.cli_logging import add_log_level_everywhere, configure_logging
 from monitor.config_file import parse_args_with_config
 from monitor.errors import UserError, run_cli_command
 
-COMMANDS = ("design", "verify", "margin", "threshold", "detectability", "run", "analyse", "identify", "subscribe", "replay", "router",
-            "demo")
+COMMANDS = (
+    "design",
+    "verify",
+    "margin",
+    "threshold",
+    "detectability",
+    "run",
+    "analyse",
+    "identify",
+    "subscribe",
+    "replay",
+    "router",
+    "demo",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -30,9 +30,14 @@ def _level(text: str) -> str:
 
 def add_log_level(parser: argparse.ArgumentParser, top: bool = False) -> None:
     """Add ``--log-level`` to ``parser`` (``top``: the program's own parser, the one that holds the default)."""
-    parser.add_argument("--log-level", type=_level, choices=LEVELS, metavar="LEVEL",
-                        default=DEFAULT_LEVEL if top else argparse.SUPPRESS,
-                        help=f"log verbosity on stderr: {', '.join(LEVELS)} (default: {DEFAULT_LEVEL})")
+    parser.add_argument(
+        "--log-level",
+        type=_level,
+        choices=LEVELS,
+        metavar="LEVEL",
+        default=DEFAULT_LEVEL if top else argparse.SUPPRESS,
+        help=f"log verbosity on stderr: {', '.join(LEVELS)} (default: {DEFAULT_LEVEL})",
+    )
 
 
 def _subparsers(parser: argparse.ArgumentParser) -> Iterable[argparse.ArgumentParser]:

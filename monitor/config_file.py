@@ -50,8 +50,9 @@ def _flag_names(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
     """``{key: action}`` for every long flag (``--zenoh-listen`` -> ``zenoh_listen``) a file may set."""
     names: dict[str, argparse.Action] = {}
     for action in parser._actions:
-        if action.dest in _RESERVED or isinstance(action, (argparse._HelpAction, argparse._VersionAction,
-                                                           argparse._SubParsersAction)):
+        if action.dest in _RESERVED or isinstance(
+            action, (argparse._HelpAction, argparse._VersionAction, argparse._SubParsersAction)
+        ):
             continue
         for option in action.option_strings:
             if option.startswith("--"):
@@ -104,7 +105,9 @@ def _value(action: argparse.Action, value: Any, where: str) -> Any:
         if not isinstance(value, bool):
             raise UserError(f"{where}: expected true or false, got {_describe(value)}")
         return action.const if value else action.default
-    repeatable = isinstance(action, argparse._AppendAction) or action.nargs in ("*", "+") or isinstance(action.nargs, int)
+    repeatable = (
+        isinstance(action, argparse._AppendAction) or action.nargs in ("*", "+") or isinstance(action.nargs, int)
+    )
     if repeatable:
         items = value if isinstance(value, list) else [value]
         return [_scalar(action, v, f"{where}[{i}]") for i, v in enumerate(items)]
@@ -163,8 +166,9 @@ def _repeatable_given(parser: argparse.ArgumentParser, args: argparse.Namespace)
     return given
 
 
-def parse_args_with_config(parser: argparse.ArgumentParser, argv: Sequence[str] | None = None,
-                           option: str = "config") -> argparse.Namespace:
+def parse_args_with_config(
+    parser: argparse.ArgumentParser, argv: Sequence[str] | None = None, option: str = "config"
+) -> argparse.Namespace:
     """Parse ``argv``; when the chosen (sub-)command got ``--config FILE``, preset it from FILE and parse again.
 
     Any command that declares ``--config`` gets the behaviour for free; a command without it is parsed once.

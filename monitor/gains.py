@@ -15,17 +15,26 @@ from typing import Any
 
 import numpy as np
 
-from monitor.model.closed_loop import Gains
 from monitor.design.result import DesignResult
 from monitor.errors import UserError
 from monitor.files import write_text_atomically
+from monitor.model.closed_loop import Gains
 from monitor.model.plant import Plant
 
 __all__ = ["GainsFile", "write_gains", "read_gains", "parse_gain_matrix"]
 
 GAIN_NAMES = ("L", "M", "K1", "K2", "K3")
-_GAINS_KEYS = set(GAIN_NAMES) | {"method", "objective", "max_losses", "gamma_e", "gamma_z", "plant_hash", "plant",
-                                 "bounds_apply_to", "fault_time_constant"}
+_GAINS_KEYS = set(GAIN_NAMES) | {
+    "method",
+    "objective",
+    "max_losses",
+    "gamma_e",
+    "gamma_z",
+    "plant_hash",
+    "plant",
+    "bounds_apply_to",
+    "fault_time_constant",
+}
 _TOP_KEYS = {"gains", "solver", "certificate", "notes"}
 
 
@@ -49,8 +58,9 @@ class GainsFile:
         if value is None:
             return None
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
-            raise UserError(f"{self.source}: key 'gains.fault_time_constant' must be a positive number of seconds, "
-                            f"got {value!r}")
+            raise UserError(
+                f"{self.source}: key 'gains.fault_time_constant' must be a positive number of seconds, got {value!r}"
+            )
         return float(value)
 
     def check_plant(self, plant: Plant) -> None:
@@ -82,8 +92,15 @@ def write_gains(path: str | Path, result: DesignResult, plant: Plant) -> None:
             **({"fault_time_constant": float(result.fault_time_constant)} if result.fault_time_constant else {}),
         },
         "solver": {
-            **({"path": result.solved.path, "status": result.solved.status,
-                "check_margin": float(result.solved.margin)} if result.solved else {"path": "none"}),
+            **(
+                {
+                    "path": result.solved.path,
+                    "status": result.solved.status,
+                    "check_margin": float(result.solved.margin),
+                }
+                if result.solved
+                else {"path": "none"}
+            ),
             "build_seconds": round(result.build_seconds, 4),
             "solve_seconds": round(result.solve_seconds, 4),
             "total_seconds": round(result.total_seconds, 4),

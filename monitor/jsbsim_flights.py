@@ -24,8 +24,9 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -54,8 +55,10 @@ def sample_values(signals) -> Callable:
         sig = signals.measured[name]
         field = fields.get((sig.message, sig.field, sig.index))
         if field is None:
-            raise UserError(f"the in-process flight cannot produce signal '{name}' ({sig.message}.{sig.field}"
-                            f"[{sig.index}]): it knows what sim-vehicle sends")
+            raise UserError(
+                f"the in-process flight cannot produce signal '{name}' ({sig.message}.{sig.field}"
+                f"[{sig.index}]): it knows what sim-vehicle sends"
+            )
         readers.append((name, field.name, sig.scale / field.scale, sig.offset))
 
     def read(sample: Sample) -> dict[str, float]:
@@ -170,20 +173,35 @@ class FlightPlan:
     seed: int = 0
 
 
-def _fly(model, plan: FlightPlan, level: str, seed: int, seconds: float, bias: float, onset_k: int,
-         alarm) -> ClosedLoop:
+def _fly(
+    model, plan: FlightPlan, level: str, seed: int, seconds: float, bias: float, onset_k: int, alarm
+) -> ClosedLoop:
     from monitor.wire.specs import parse_delay_spec, parse_fault_spec
     from sim_vehicle.jsbsim_model import AircraftSpec, JSBSimFlightModel
     from sim_vehicle.simulation import Simulation
 
     plant = model.plant
-    spec = AircraftSpec(plan.aircraft, aircraft_dir=plan.aircraft_dir, airspeed_kt=plan.airspeed_kt,
-                        altitude_ft=plan.altitude_ft, h=plant.h, turbulence=level, seed=seed)
+    spec = AircraftSpec(
+        plan.aircraft,
+        aircraft_dir=plan.aircraft_dir,
+        airspeed_kt=plan.airspeed_kt,
+        altitude_ft=plan.altitude_ft,
+        h=plant.h,
+        turbulence=level,
+        seed=seed,
+    )
     loop = ClosedLoop(model.estimator, model.signals, alarm)
     fault = parse_fault_spec(f"bias:{bias!r}@{onset_k}" if bias else None)
     delay = parse_delay_spec(f"uniform:{plant.tau_min!r}:{plant.tau_max!r}", seed=seed)
-    sim = Simulation(plant=None, sink=loop, steps=int(round(seconds / plant.h)), model=JSBSimFlightModel(spec),
-                     fault=fault, delay=delay, seed=seed)
+    sim = Simulation(
+        plant=None,
+        sink=loop,
+        steps=int(round(seconds / plant.h)),
+        model=JSBSimFlightModel(spec),
+        fault=fault,
+        delay=delay,
+        seed=seed,
+    )
     return loop.fly(sim)
 
 
@@ -195,8 +213,9 @@ def _detected(loop: ClosedLoop, onset_k: int, window: int) -> int | None:
     return raised[0] - onset_k if raised else None
 
 
-def monte_carlo(model, prediction: Detectability, flights: int, plan: FlightPlan,
-                progress: Callable[[str], None] = lambda _: None) -> MonteCarlo:
+def monte_carlo(
+    model, prediction: Detectability, flights: int, plan: FlightPlan, progress: Callable[[str], None] = lambda _: None
+) -> MonteCarlo:
     """Fly ``flights`` seeded JSBSim flights at the prediction's turbulence and compare (module docstring)."""
     from monitor.service.alarm import AlarmConfig
 
@@ -228,10 +247,12 @@ def monte_carlo(model, prediction: Detectability, flights: int, plan: FlightPlan
             if gust is not None:
                 disturbances.append(gust)
         smallest.append(_smallest_bias(model, plan, prediction, seed, alarm, window))
-        progress(f"flight {i + 1}/{flights} (seed {seed}): {len(loop.raised(warm, onset))} false "
-                 f"alarm(s) in {plan.minutes:g} min, std f_hat {fh.std():.3g}, bias {prediction.bias:.3g} "
-                 + ("not detected" if found is None else f"detected after {found * h:.2f} s")
-                 + f" within {prediction.within_s:g} s; smallest detected {smallest[-1]:.3g}")
+        progress(
+            f"flight {i + 1}/{flights} (seed {seed}): {len(loop.raised(warm, onset))} false "
+            f"alarm(s) in {plan.minutes:g} min, std f_hat {fh.std():.3g}, bias {prediction.bias:.3g} "
+            + ("not detected" if found is None else f"detected after {found * h:.2f} s")
+            + f" within {prediction.within_s:g} s; smallest detected {smallest[-1]:.3g}"
+        )
     hours = flights * (onset - warm) * h / 3600.0
     v0 = float(np.mean(np.concatenate(fh_all) ** 2))
     v1 = float(np.mean(np.concatenate([f[:-1] * f[1:] for f in fh_all])))
@@ -239,19 +260,37 @@ def monte_carlo(model, prediction: Detectability, flights: int, plan: FlightPlan
     assert std is not None and rho is not None  # a turbulence prediction (checked above) carries them
     measured = None
     if disturbances:  # per flight; pooled as the rms sigma and the mean time constant
-        measured = {"sigma": float(np.sqrt(np.mean([g["sigma"] ** 2 for g in disturbances]))),
-                    "time_constant": float(np.mean([g["time_constant"] for g in disturbances])),
-                    "how": "as fault-monitor identify measures it (the model's one-step residual on Dd), pre-fault"}
+        measured = {
+            "sigma": float(np.sqrt(np.mean([g["sigma"] ** 2 for g in disturbances]))),
+            "time_constant": float(np.mean([g["time_constant"] for g in disturbances])),
+            "how": "as fault-monitor identify measures it (the model's one-step residual on Dd), pre-fault",
+        }
     return MonteCarlo(
-        flights=flights, aircraft=plan.aircraft, turbulence=prediction.turbulence, hours=hours,
-        false_alarms=false_alarms, false_alarms_per_hour=false_alarms / hours,
+        flights=flights,
+        aircraft=plan.aircraft,
+        turbulence=prediction.turbulence,
+        hours=hours,
+        false_alarms=false_alarms,
+        false_alarms_per_hour=false_alarms / hours,
         predicted_per_hour=2 * 3600 * upcrossing_rate(prediction.threshold, std, rho, h),
-        fhat_std=math.sqrt(v0), fhat_rho=v1 / v0 if v0 > 0 else 0.0,
-        crossings=[{"level": c, "predicted_per_hour": 2 * 3600 * upcrossing_rate(c, std, rho, h),
-                    "observed_per_hour": float(n) / hours} for c, n in zip(levels, crossings)],
-        bias=prediction.bias, detected_within=sum(t is not None for t in detections), detection_times_s=detections,
-        smallest_bias=smallest, smallest_bias_95=float(np.quantile(smallest, 0.95, method="higher")),
-        disturbance=measured, seconds=time.perf_counter() - started)
+        fhat_std=math.sqrt(v0),
+        fhat_rho=v1 / v0 if v0 > 0 else 0.0,
+        crossings=[
+            {
+                "level": c,
+                "predicted_per_hour": 2 * 3600 * upcrossing_rate(c, std, rho, h),
+                "observed_per_hour": float(n) / hours,
+            }
+            for c, n in zip(levels, crossings)
+        ],
+        bias=prediction.bias,
+        detected_within=sum(t is not None for t in detections),
+        detection_times_s=detections,
+        smallest_bias=smallest,
+        smallest_bias_95=float(np.quantile(smallest, 0.95, method="higher")),
+        disturbance=measured,
+        seconds=time.perf_counter() - started,
+    )
 
 
 def _flight_disturbance(plant: Plant, signals, loop: ClosedLoop, first: int, last: int) -> dict | None:

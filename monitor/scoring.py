@@ -19,8 +19,8 @@ import numpy as np
 
 from monitor.checks import metrics
 from monitor.errors import UserError
-from monitor.service.records import TruthRecord
 from monitor.service.recording_reader import Recording, VehicleSeries
+from monitor.service.records import TruthRecord
 
 __all__ = ["score_recording", "score_vehicle", "SETTLING_TOL"]
 
@@ -85,8 +85,7 @@ def _times(value: int | None, h: float | None) -> float | None:
     return None if value is None or h is None else value * h
 
 
-def score_vehicle(series: VehicleSeries, fault_spec: str | None = None,
-                  tol: float = SETTLING_TOL) -> dict[str, Any]:
+def score_vehicle(series: VehicleSeries, fault_spec: str | None = None, tol: float = SETTLING_TOL) -> dict[str, Any]:
     """Every score of one vehicle, as a JSON-able dict (see ``fault-monitor replay --help`` for the keys).
 
     A vehicle that restarted has several runs (k starts again): ``samples`` counts every processed sample
@@ -115,8 +114,7 @@ def score_vehicle(series: VehicleSeries, fault_spec: str | None = None,
     detected = metrics.first_alarm(k, alarm, start=onset) if onset is not None else None
     settling = None
     if fault and onset is not None and fault.size:
-        settling = metrics.settling_steps(k[known], f_hat[known], fault.f[known], onset, fault.size, tol,
-                                          fault.stop)
+        settling = metrics.settling_steps(k[known], f_hat[known], fault.f[known], onset, fault.size, tol, fault.stop)
     rms_ef = rms_ef_post = None
     if fault and known.any():
         rms_ef = metrics.rms_error(k[known], f_hat[known], fault.f[known])
@@ -168,8 +166,9 @@ def _worst(values: list[Any]) -> Any:
     return None if not values or any(v is None for v in values) else max(values)
 
 
-def score_recording(recording: Recording, sysid: int | None = None, fault_spec: str | None = None,
-                    tol: float = SETTLING_TOL) -> dict[str, Any]:
+def score_recording(
+    recording: Recording, sysid: int | None = None, fault_spec: str | None = None, tol: float = SETTLING_TOL
+) -> dict[str, Any]:
     """The report of ``fault-monitor replay --json``.
 
     Shape: ``{"file", "application_id", "complete", "properties", "sysids", "vehicles": {"<sysid>": {..}},
@@ -198,14 +197,17 @@ def score_recording(recording: Recording, sysid: int | None = None, fault_spec: 
     else:
         rows = list(per.values())
         faulty = [r for r in rows if r["onset_k"] is not None]
-        out.update({
-            "samples": sum(r["samples"] for r in rows),
-            "false_alarms": (None if any(r["false_alarms"] is None for r in rows)
-                             else sum(r["false_alarms"] for r in rows)),
-            "peak_alpha": max((r["peak_alpha"] for r in rows if r["peak_alpha"] is not None), default=None),
-            "rms_ef": max((r["rms_ef"] for r in rows if r["rms_ef"] is not None), default=None),
-            "settling_steps": _worst([r["settling_steps"] for r in faulty]),
-            "detection_steps": _worst([r["detection_steps"] for r in faulty]),
-        })
+        out.update(
+            {
+                "samples": sum(r["samples"] for r in rows),
+                "false_alarms": (
+                    None if any(r["false_alarms"] is None for r in rows) else sum(r["false_alarms"] for r in rows)
+                ),
+                "peak_alpha": max((r["peak_alpha"] for r in rows if r["peak_alpha"] is not None), default=None),
+                "rms_ef": max((r["rms_ef"] for r in rows if r["rms_ef"] is not None), default=None),
+                "settling_steps": _worst([r["settling_steps"] for r in faulty]),
+                "detection_steps": _worst([r["detection_steps"] for r in faulty]),
+            }
+        )
     out["vehicles"] = {str(s): r for s, r in per.items()}
     return out

@@ -63,13 +63,12 @@ def _version() -> str:
     return f"sim-vehicle {mine} ({jsbsim})"
 
 
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="sim-vehicle",
         description="A simulated UAV (short-period pitch dynamics, or a JSBSim aircraft) speaking MAVLink 2: the "
-                    "vehicle fault-monitor is tested and demonstrated against. It publishes the exact truth on Zenoh "
-                    "for scoring.",
+        "vehicle fault-monitor is tested and demonstrated against. It publishes the exact truth on Zenoh "
+        "for scoring.",
         epilog="Start with: sim-vehicle run --help",
     )
     parser.add_argument("--version", action="version", version=_version())
@@ -90,67 +89,148 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--config", metavar="FILE", help="TOML vehicle file whose keys preset these flags")
     g = run.add_argument_group("vehicle")
-    g.add_argument("--plant", default=None, metavar="P",
-                   help="continuous plant preset or TOML file (default: paper-continuous, unless --aircraft)")
+    g.add_argument(
+        "--plant",
+        default=None,
+        metavar="P",
+        help="continuous plant preset or TOML file (default: paper-continuous, unless --aircraft)",
+    )
     g.add_argument("--sysid", type=int, default=1, metavar="N", help="MAVLink system id, 1..255 (default: 1)")
-    g.add_argument("--steps", type=int, default=None, metavar="N",
-                   help="number of samples to send, then exit (default: run until a signal)")
-    g.add_argument("--speedup", type=float, default=1.0, metavar="S",
-                   help="simulated seconds per wall-clock second; delays scale too (default: 1)")
+    g.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        metavar="N",
+        help="number of samples to send, then exit (default: run until a signal)",
+    )
+    g.add_argument(
+        "--speedup",
+        type=float,
+        default=1.0,
+        metavar="S",
+        help="simulated seconds per wall-clock second; delays scale too (default: 1)",
+    )
     g.add_argument("--seed", type=int, default=0, metavar="N", help="seed of every random draw (default: 0)")
     g.add_argument("--fault", default=None, metavar="SPEC", help="elevator fault, e.g. bias:2@20 (default: none)")
-    g.add_argument("--wind", default=None, metavar="SPEC",
-                   help="the plant's wind: paper (oscillator, the default), none, or turbulence:SIGMA[:TAU]")
-    g.add_argument("--sensor-noise", default=0.0, type=float, metavar="SIGMA",
-                   help="white noise added to the measured alpha and q, plant units (default: 0)")
+    g.add_argument(
+        "--wind",
+        default=None,
+        metavar="SPEC",
+        help="the plant's wind: paper (oscillator, the default), none, or turbulence:SIGMA[:TAU]",
+    )
+    g.add_argument(
+        "--sensor-noise",
+        default=0.0,
+        type=float,
+        metavar="SIGMA",
+        help="white noise added to the measured alpha and q, plant units (default: 0)",
+    )
     g.add_argument("--x0", default=None, metavar="A,Q", help="initial state (default: 0)")
-    g.add_argument("--autopilot", default=None, metavar="K",
-                   help="fly with an on-board static gain u(k) = K y(k) (comma-separated, one per output), issued "
-                   "at sample k, reported in that sample's ACTUATOR_OUTPUT_STATUS and applied after the drawn delay; "
-                   "commands from outside are ignored. For observe-only monitoring (fault-monitor run --observe)")
-    g.add_argument("--excite", default=None, metavar="SPEC",
-                   help="prbs:AMP:SECONDS: an identification manoeuvre flown on board, open loop: a seeded random "
-                   "binary sequence of trim +-AMP deg (dwell 0.2-0.8 s) for SECONDS, then trim; issued at each sample, "
-                   "reported in its ACTUATOR_OUTPUT_STATUS, applied after the drawn delay; commands from outside are "
-                   "ignored meanwhile")
+    g.add_argument(
+        "--autopilot",
+        default=None,
+        metavar="K",
+        help="fly with an on-board static gain u(k) = K y(k) (comma-separated, one per output), issued "
+        "at sample k, reported in that sample's ACTUATOR_OUTPUT_STATUS and applied after the drawn delay; "
+        "commands from outside are ignored. For observe-only monitoring (fault-monitor run --observe)",
+    )
+    g.add_argument(
+        "--excite",
+        default=None,
+        metavar="SPEC",
+        help="prbs:AMP:SECONDS: an identification manoeuvre flown on board, open loop: a seeded random "
+        "binary sequence of trim +-AMP deg (dwell 0.2-0.8 s) for SECONDS, then trim; issued at each sample, "
+        "reported in its ACTUATOR_OUTPUT_STATUS, applied after the drawn delay; commands from outside are "
+        "ignored meanwhile",
+    )
     a = run.add_argument_group("aircraft (JSBSim, nonlinear 6-DOF; instead of --plant)")
-    a.add_argument("--aircraft", default=None, metavar="NAME",
-                   help="fly this JSBSim aircraft (any JSBSim ships, e.g. c172p, 737, J3Cub; or your own with "
-                        "--aircraft-dir), trimmed in level flight; the elevator is an absolute deflection in degrees")
-    a.add_argument("--aircraft-dir", default=None, metavar="DIR",
-                   help="where NAME is: a JSBSim root (DIR/aircraft/NAME/NAME.xml), a directory of aircraft "
-                        "(DIR/NAME/NAME.xml) or the aircraft's folder (DIR/NAME.xml)")
-    a.add_argument("--airspeed", type=float, default=None, metavar="KT",
-                   help="trim airspeed, knots calibrated (default: 100)")
-    a.add_argument("--altitude", type=float, default=None, metavar="FT",
-                   help="trim altitude, feet above sea level (default: 3000)")
-    a.add_argument("--rate", type=float, default=None, metavar="HZ",
-                   help="sampling rate: telemetry every h = 1/HZ s (default: 20)")
-    a.add_argument("--dt", type=float, default=None, metavar="S",
-                   help="JSBSim's integration step, made to divide h (default: 1/120 s, JSBSim's own)")
-    a.add_argument("--turbulence", default=None, metavar="LEVEL",
-                   help="none, light, moderate or severe: JSBSim's MIL-F-8785C Dryden turbulence, seeded by --seed "
-                        "(default: none)")
+    a.add_argument(
+        "--aircraft",
+        default=None,
+        metavar="NAME",
+        help="fly this JSBSim aircraft (any JSBSim ships, e.g. c172p, 737, J3Cub; or your own with "
+        "--aircraft-dir), trimmed in level flight; the elevator is an absolute deflection in degrees",
+    )
+    a.add_argument(
+        "--aircraft-dir",
+        default=None,
+        metavar="DIR",
+        help="where NAME is: a JSBSim root (DIR/aircraft/NAME/NAME.xml), a directory of aircraft "
+        "(DIR/NAME/NAME.xml) or the aircraft's folder (DIR/NAME.xml)",
+    )
+    a.add_argument(
+        "--airspeed", type=float, default=None, metavar="KT", help="trim airspeed, knots calibrated (default: 100)"
+    )
+    a.add_argument(
+        "--altitude", type=float, default=None, metavar="FT", help="trim altitude, feet above sea level (default: 3000)"
+    )
+    a.add_argument(
+        "--rate", type=float, default=None, metavar="HZ", help="sampling rate: telemetry every h = 1/HZ s (default: 20)"
+    )
+    a.add_argument(
+        "--dt",
+        type=float,
+        default=None,
+        metavar="S",
+        help="JSBSim's integration step, made to divide h (default: 1/120 s, JSBSim's own)",
+    )
+    a.add_argument(
+        "--turbulence",
+        default=None,
+        metavar="LEVEL",
+        help="none, light, moderate or severe: JSBSim's MIL-F-8785C Dryden turbulence, seeded by --seed "
+        "(default: none)",
+    )
     n = run.add_argument_group("network (emulated on top of the real UDP path)")
-    n.add_argument("--delay", default=None, metavar="SPEC",
-                   help="total sensor->actuator delay in simulated seconds (default: uniform:0:0.46 for h = 1 s, "
-                        "i.e. uniform over [tau_min, min(0.46 h, tau_max)])")
-    n.add_argument("--delay-split", default=0.5, type=float, metavar="R",
-                   help="share of the delay spent before the sample is sent (sensor->controller); the rest is "
-                        "the controller->actuator budget (default: 0.5)")
-    n.add_argument("--loss", default=0.0, type=float, metavar="P", help="loss probability per datagram, both ways (default: 0)")
-    n.add_argument("--duplicate", default=0.0, type=float, metavar="P", help="duplication probability per datagram (default: 0)")
-    n.add_argument("--reorder", default=0.0, type=float, metavar="P",
-                   help="probability that a datagram is held ~1 sample so the next overtakes it (default: 0)")
+    n.add_argument(
+        "--delay",
+        default=None,
+        metavar="SPEC",
+        help="total sensor->actuator delay in simulated seconds (default: uniform:0:0.46 for h = 1 s, "
+        "i.e. uniform over [tau_min, min(0.46 h, tau_max)])",
+    )
+    n.add_argument(
+        "--delay-split",
+        default=0.5,
+        type=float,
+        metavar="R",
+        help="share of the delay spent before the sample is sent (sensor->controller); the rest is "
+        "the controller->actuator budget (default: 0.5)",
+    )
+    n.add_argument(
+        "--loss", default=0.0, type=float, metavar="P", help="loss probability per datagram, both ways (default: 0)"
+    )
+    n.add_argument(
+        "--duplicate", default=0.0, type=float, metavar="P", help="duplication probability per datagram (default: 0)"
+    )
+    n.add_argument(
+        "--reorder",
+        default=0.0,
+        type=float,
+        metavar="P",
+        help="probability that a datagram is held ~1 sample so the next overtakes it (default: 0)",
+    )
     m = run.add_argument_group("MAVLink")
-    m.add_argument("--mavlink", default="udpout:127.0.0.1:14550", metavar="udpout:HOST:PORT",
-                   help="where the monitor listens (default: udpout:127.0.0.1:14550); commands come back to "
-                        "the vehicle's own socket")
-    m.add_argument("--bind", default="127.0.0.1:0", metavar="HOST:PORT",
-                   help="the vehicle's own socket (default: 127.0.0.1:0, an ephemeral loopback port)")
-    m.add_argument("--signing-key", default=None, metavar="FILE",
-                   help="MAVLink 2 signing: 32 raw bytes, 64 hex digits or a passphrase (hashed with SHA-256 "
-                        "as MAVProxy does); unsigned, wrongly signed and replayed commands are rejected")
+    m.add_argument(
+        "--mavlink",
+        default="udpout:127.0.0.1:14550",
+        metavar="udpout:HOST:PORT",
+        help="where the monitor listens (default: udpout:127.0.0.1:14550); commands come back to "
+        "the vehicle's own socket",
+    )
+    m.add_argument(
+        "--bind",
+        default="127.0.0.1:0",
+        metavar="HOST:PORT",
+        help="the vehicle's own socket (default: 127.0.0.1:0, an ephemeral loopback port)",
+    )
+    m.add_argument(
+        "--signing-key",
+        default=None,
+        metavar="FILE",
+        help="MAVLink 2 signing: 32 raw bytes, 64 hex digits or a passphrase (hashed with SHA-256 "
+        "as MAVProxy does); unsigned, wrongly signed and replayed commands are rejected",
+    )
     o = run.add_argument_group("outputs")
     o.add_argument("--no-zenoh", action="store_true", help="do not publish the truth on Zenoh")
     o.add_argument("--truth-jsonl", default=None, metavar="FILE", help="also write every truth payload to FILE")
@@ -175,10 +255,22 @@ def _flight_model(settings):
 
     model = JSBSimFlightModel(settings.aircraft)
     trim, spec = model.trim, settings.aircraft
-    log.info("aircraft %s (JSBSim %s) trimmed at %.1f kt, %.0f ft: alpha %.3f deg, theta %.3f deg, elevator %.3f deg "
-             "(travel %.2f..%.2f), throttle %.3f; dt %.6f s, h %.6f s, turbulence %s", spec.name, model.version,
-             trim["airspeed_kt"], trim["altitude_ft"], trim["alpha_deg"], trim["theta_deg"], trim["elevator_deg"],
-             *model.travel, trim["throttle"], model.dt, model.h, spec.turbulence)
+    log.info(
+        "aircraft %s (JSBSim %s) trimmed at %.1f kt, %.0f ft: alpha %.3f deg, theta %.3f deg, elevator %.3f deg "
+        "(travel %.2f..%.2f), throttle %.3f; dt %.6f s, h %.6f s, turbulence %s",
+        spec.name,
+        model.version,
+        trim["airspeed_kt"],
+        trim["altitude_ft"],
+        trim["alpha_deg"],
+        trim["theta_deg"],
+        trim["elevator_deg"],
+        *model.travel,
+        trim["throttle"],
+        model.dt,
+        model.h,
+        spec.turbulence,
+    )
     return model
 
 
@@ -203,18 +295,45 @@ def cmd_run(args: argparse.Namespace) -> int:
         truth = TruthPublisher(session, truth_key if session is not None else None, args.truth_jsonl)
         publisher = truth.publisher
         sim = Simulation(  # sink=None below: run_daemon plugs its UDP sink in before the first event
-            plant=settings.plant, sink=None, sysid=settings.sysid, steps=settings.steps,  # type: ignore[arg-type]
-            fault=settings.fault, delay=settings.delay, wind=settings.wind, impairment=settings.impairment,
-            delay_split=settings.delay_split, sensor_noise=settings.sensor_noise, seed=settings.seed, x0=settings.x0,
-            autopilot=settings.autopilot, model=model, excite=settings.excite,
+            plant=settings.plant,
+            sink=None,  # type: ignore[arg-type]  # run_daemon plugs its UDP sink in before the first event
+            sysid=settings.sysid,
+            steps=settings.steps,
+            fault=settings.fault,
+            delay=settings.delay,
+            wind=settings.wind,
+            impairment=settings.impairment,
+            delay_split=settings.delay_split,
+            sensor_noise=settings.sensor_noise,
+            seed=settings.seed,
+            x0=settings.x0,
+            autopilot=settings.autopilot,
+            model=model,
+            excite=settings.excite,
         )
         weather = f"turbulence {settings.aircraft.turbulence}" if settings.aircraft else f"wind {args.wind or 'paper'}"
-        log.info("%s, fault %s, delay %s, %s, excite %s, truth on %s", settings.vehicle, settings.fault,
-                 settings.delay, weather, settings.excite or "none", truth_key if session is not None else "(no zenoh)")
+        log.info(
+            "%s, fault %s, delay %s, %s, excite %s, truth on %s",
+            settings.vehicle,
+            settings.fault,
+            settings.delay,
+            weather,
+            settings.excite or "none",
+            truth_key if session is not None else "(no zenoh)",
+        )
         decoder = CommandDecoder(settings.sysid, settings.h, signing_key)
         try:
-            asyncio.run(run_daemon(sim, decoder, truth, target=settings.target, bind=settings.bind,
-                                   speedup=settings.speedup, key=signing_key))
+            asyncio.run(
+                run_daemon(
+                    sim,
+                    decoder,
+                    truth,
+                    target=settings.target,
+                    bind=settings.bind,
+                    speedup=settings.speedup,
+                    key=signing_key,
+                )
+            )
         except OSError as exc:
             raise UserError(f"cannot use UDP socket {settings.bind[0]}:{settings.bind[1]}: {exc.strerror}") from None
         except FlightModelError as exc:
@@ -224,8 +343,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(sim.stats.summary(), flush=True)
         if args.summary_json:
             with open(args.summary_json, "w", encoding="utf-8") as fh:
-                json.dump({"sysid": settings.sysid, "truth_published": truth.published, **sim.stats.as_dict()}, fh,
-                          indent=2)
+                json.dump(
+                    {"sysid": settings.sysid, "truth_published": truth.published, **sim.stats.as_dict()}, fh, indent=2
+                )
     finally:
         close_quietly(session, publisher)
         if model is not None:

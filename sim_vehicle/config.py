@@ -33,10 +33,18 @@ import numpy as np
 
 from monitor.config_file import apply_config_file  # the one reader of --config files (also fault-monitor run)
 from monitor.errors import UserError
-from monitor.wire import TURBULENCE_LEVELS
 from monitor.model.plant import Plant, load_plant
-from monitor.wire.specs import (DelaySampler, Excitation, FaultSchedule, Wind, parse_delay_spec, parse_excite_spec,
-                                parse_fault_spec, parse_wind_spec)
+from monitor.wire import TURBULENCE_LEVELS
+from monitor.wire.specs import (
+    DelaySampler,
+    Excitation,
+    FaultSchedule,
+    Wind,
+    parse_delay_spec,
+    parse_excite_spec,
+    parse_fault_spec,
+    parse_wind_spec,
+)
 from sim_vehicle.network import Impairment
 
 if TYPE_CHECKING:
@@ -122,10 +130,12 @@ def _aircraft_spec(args: argparse.Namespace, seed: int):
     name = str(args.aircraft)
     for flag in ("plant", "wind", "x0", "autopilot"):
         if getattr(args, flag, None) is not None:
-            why = {"plant": "one vehicle flies either a plant or an aircraft",
-                   "wind": "the aircraft flies in JSBSim's weather: use --turbulence",
-                   "x0": "the aircraft starts trimmed (--airspeed, --altitude)",
-                   "autopilot": "the on-board gain is for the linear plant; --excite flies an aircraft on board"}[flag]
+            why = {
+                "plant": "one vehicle flies either a plant or an aircraft",
+                "wind": "the aircraft flies in JSBSim's weather: use --turbulence",
+                "x0": "the aircraft starts trimmed (--airspeed, --altitude)",
+                "autopilot": "the on-board gain is for the linear plant; --excite flies an aircraft on board",
+            }[flag]
             raise UserError(f"--{flag.replace('_', '-')} does not go with --aircraft: {why}")
     value = {k: AIRCRAFT_DEFAULTS[k] if getattr(args, k, None) is None else getattr(args, k) for k in AIRCRAFT_DEFAULTS}
     airspeed, altitude, rate = (_number(value[k], k) for k in ("airspeed", "altitude", "rate"))
@@ -138,8 +148,16 @@ def _aircraft_spec(args: argparse.Namespace, seed: int):
     turbulence = str(value["turbulence"]).strip().lower()
     if turbulence not in TURBULENCE_LEVELS:
         raise UserError(f"--turbulence must be one of {', '.join(TURBULENCE_LEVELS)}, got '{value['turbulence']}'")
-    return AircraftSpec(name=name, aircraft_dir=getattr(args, "aircraft_dir", None), airspeed_kt=airspeed,
-                        altitude_ft=altitude, h=1.0 / rate, dt=dt, turbulence=turbulence, seed=seed)
+    return AircraftSpec(
+        name=name,
+        aircraft_dir=getattr(args, "aircraft_dir", None),
+        airspeed_kt=airspeed,
+        altitude_ft=altitude,
+        h=1.0 / rate,
+        dt=dt,
+        turbulence=turbulence,
+        seed=seed,
+    )
 
 
 def settings_from_args(args: argparse.Namespace) -> Settings:
@@ -192,8 +210,11 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
         delay=parse_delay_spec(delay_text, seed=seed),
         delay_split=_probability(args.delay_split, "delay-split"),
         impairment=Impairment(
-            loss=_probability(args.loss, "loss"), duplicate=_probability(args.duplicate, "duplicate"),
-            reorder=_probability(args.reorder, "reorder"), h=h, seed=seed,
+            loss=_probability(args.loss, "loss"),
+            duplicate=_probability(args.duplicate, "duplicate"),
+            reorder=_probability(args.reorder, "reorder"),
+            h=h,
+            seed=seed,
         ),
         wind=parse_wind_spec(args.wind or "paper", h, seed) if plant is not None else Wind(oscillator=False, h=h),
         sensor_noise=noise,
@@ -214,8 +235,10 @@ def _autopilot_gain(value, plant: Plant) -> np.ndarray | None:
     parts = value if isinstance(value, list) else str(value).split(",")
     gain = [_number(v, "autopilot") for v in parts]
     if len(gain) != plant.l or plant.m != 1:
-        raise UserError(f"--autopilot needs {plant.l} comma-separated gain(s), one per plant output "
-                        f"(single-input plants only), got {len(gain)}")
+        raise UserError(
+            f"--autopilot needs {plant.l} comma-separated gain(s), one per plant output "
+            f"(single-input plants only), got {len(gain)}"
+        )
     if not all(np.isfinite(gain)):
         raise UserError("--autopilot gains must be finite")
     return np.array([gain])

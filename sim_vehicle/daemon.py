@@ -76,7 +76,7 @@ class UdpSink:
 class VehicleProtocol(asyncio.DatagramProtocol):
     """Feeds datagrams to the decoder and the commands to the simulation, stamped in simulated time."""
 
-    def __init__(self, daemon: "_Daemon") -> None:
+    def __init__(self, daemon: _Daemon) -> None:
         self.daemon = daemon
 
     def datagram_received(self, data: bytes, addr) -> None:
@@ -140,8 +140,16 @@ class _Daemon:
             raise self.failure
 
 
-async def run_daemon(sim: Simulation, decoder: CommandDecoder, truth: TruthPublisher, *, target: tuple[str, int],
-                     bind: tuple[str, int], speedup: float, key: bytes | None) -> None:
+async def run_daemon(
+    sim: Simulation,
+    decoder: CommandDecoder,
+    truth: TruthPublisher,
+    *,
+    target: tuple[str, int],
+    bind: tuple[str, int],
+    speedup: float,
+    key: bytes | None,
+) -> None:
     """Run until the simulation finishes or SIGINT/SIGTERM; the socket is closed on the way out."""
     loop = asyncio.get_running_loop()
     daemon = _Daemon(sim, decoder, speedup)

@@ -22,7 +22,7 @@ wind ``d`` are held over each sampling interval and handed to the model with the
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.linalg import expm
@@ -51,8 +51,15 @@ class LinearFlightModel:
     model), the deflection through ``B_c``.
     """
 
-    def __init__(self, model: ContinuousModel, h: float = 1.0, actuator: Actuator | None = None,
-                 x: Sequence[float] | None = None, name: str = "linear", unit: str = "deg") -> None:
+    def __init__(
+        self,
+        model: ContinuousModel,
+        h: float = 1.0,
+        actuator: Actuator | None = None,
+        x: Sequence[float] | None = None,
+        name: str = "linear",
+        unit: str = "deg",
+    ) -> None:
         self.model = model
         self.h = float(h)
         self.name = name
@@ -63,25 +70,24 @@ class LinearFlightModel:
             raise ValueError(f"the initial state needs {n} values, got {self.x.size}")
         actuator = actuator or Actuator()
         limit = actuator.limit
-        self.travel: tuple[float | None, float | None] = ((-limit, limit) if limit is not None
-                                                          else (None, None))
+        self.travel: tuple[float | None, float | None] = (-limit, limit) if limit is not None else (None, None)
         self.rate_limit = actuator.rate_limit
         self.trim_deflection = 0.0
         self.n_faults = model.D_cf.shape[1]
         self.n_wind = model.D_cd.shape[1]
-        self.state_names: tuple[str, ...] = (("alpha_deg", "q_deg_s") if n == 2
-                                             else tuple(f"x{i + 1}" for i in range(n)))
+        self.state_names: tuple[str, ...] = ("alpha_deg", "q_deg_s") if n == 2 else tuple(f"x{i + 1}" for i in range(n))
         self.t = 0.0
         self._cache: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
     @classmethod
-    def from_plant(cls, plant: Plant, x0: Sequence[float] | None = None) -> "LinearFlightModel":
+    def from_plant(cls, plant: Plant, x0: Sequence[float] | None = None) -> LinearFlightModel:
         if plant.continuous is None:
-            raise ValueError("the simulator needs a continuous plant (form = \"continuous\")")
+            raise ValueError('the simulator needs a continuous plant (form = "continuous")')
         return cls(plant.continuous, plant.h, plant.actuator, x0, plant.name, plant.unit)
 
-    def step(self, T: float, deflection: float, rate: float, f: Sequence[float] | np.ndarray,
-             d: Sequence[float] | np.ndarray) -> None:
+    def step(
+        self, T: float, deflection: float, rate: float, f: Sequence[float] | np.ndarray, d: Sequence[float] | np.ndarray
+    ) -> None:
         phi, g1, g2 = self._matrices(T)
         B = self.model.B_c[:, 0]
         w = self.model.D_cf @ np.asarray(f, dtype=float) + self.model.D_cd @ np.asarray(d, dtype=float)
@@ -130,8 +136,9 @@ class Airframe:
     non-decreasing times. ``Airframe(ContinuousModel, Actuator, x=...)`` builds the linear model.
     """
 
-    def __init__(self, model: FlightModel | ContinuousModel, actuator: Actuator | None = None,
-                 x: Sequence[float] | None = None) -> None:
+    def __init__(
+        self, model: FlightModel | ContinuousModel, actuator: Actuator | None = None, x: Sequence[float] | None = None
+    ) -> None:
         flight: FlightModel
         if isinstance(model, ContinuousModel):
             flight = LinearFlightModel(model, actuator=actuator, x=x)
@@ -154,9 +161,14 @@ class Airframe:
     def x(self) -> np.ndarray:
         return np.asarray(self.flight.state())
 
-    def set_interval(self, f: Sequence[float] | np.ndarray, d: Sequence[float] | np.ndarray,
-                     effectiveness: float = 1.0, stuck: bool = False,
-                     stuck_value: float | None = None) -> None:
+    def set_interval(
+        self,
+        f: Sequence[float] | np.ndarray,
+        d: Sequence[float] | np.ndarray,
+        effectiveness: float = 1.0,
+        stuck: bool = False,
+        stuck_value: float | None = None,
+    ) -> None:
         """Hold fault ``f`` and wind ``d`` from now on; apply the deflection faults of this interval."""
         self.f = np.asarray(f, dtype=float)
         self.d = np.asarray(d, dtype=float)

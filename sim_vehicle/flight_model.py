@@ -18,8 +18,9 @@ Units: degrees for angles and deflections, deg/s for rates, m/s for airspeed, se
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol, Sequence, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 if TYPE_CHECKING:
     import numpy as np
@@ -54,18 +55,19 @@ class FlightModel(Protocol):
     """A vehicle's flight physics, advanced by ``step`` from event to event (times never go backwards)."""
 
     name: str
-    h: float                      # sampling period (s)
-    unit: str                     # unit of the deflection, the faults and the angles ("deg")
-    n_faults: int                 # length of the additive fault vector f that ``step`` takes
-    n_wind: int                   # length of the external wind vector d that ``step`` takes (0: own weather)
-    trim_deflection: float        # the deflection that holds the operating point (0 for a deviation model)
+    h: float  # sampling period (s)
+    unit: str  # unit of the deflection, the faults and the angles ("deg")
+    n_faults: int  # length of the additive fault vector f that ``step`` takes
+    n_wind: int  # length of the external wind vector d that ``step`` takes (0: own weather)
+    trim_deflection: float  # the deflection that holds the operating point (0 for a deviation model)
     travel: tuple[float | None, float | None]  # the surface's mechanical travel, (low, high); None: unlimited
-    rate_limit: float | None      # servo slew rate (unit/s); None: the surface jumps
+    rate_limit: float | None  # servo slew rate (unit/s); None: the surface jumps
     state_names: tuple[str, ...]  # names of ``state()``'s entries, e.g. ("alpha_deg", "q_deg_s")
-    t: float                      # simulated time reached (s)
+    t: float  # simulated time reached (s)
 
-    def step(self, T: float, deflection: float, rate: float, f: Sequence[float] | np.ndarray,
-             d: Sequence[float] | np.ndarray) -> None:
+    def step(
+        self, T: float, deflection: float, rate: float, f: Sequence[float] | np.ndarray, d: Sequence[float] | np.ndarray
+    ) -> None:
         """Fly ``T`` seconds with the surface at ``deflection + rate * s`` (s from 0 to T), the additive fault
         ``f`` and the wind ``d`` held. ``deflection`` already includes the loss of effectiveness; how ``f``
         enters is the model's (the linear plant: through ``D_cf``; an aircraft: at the surface)."""

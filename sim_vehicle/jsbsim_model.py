@@ -46,9 +46,9 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -169,12 +169,13 @@ def _reason(printed: str) -> str:
 def _locate(name: str, aircraft_dir: str | None, bundled_root: Path) -> tuple[Path, Path | None, bool]:
     """``(root_dir, aircraft_path or None, add_model_to_path)`` for ``load_model_with_paths``."""
     if not name or name != Path(name).name or name.startswith("."):
-        raise UserError(f"--aircraft '{name}': expected an aircraft name such as c172p "
-                        "(use --aircraft-dir for a path)")
+        raise UserError(f"--aircraft '{name}': expected an aircraft name such as c172p (use --aircraft-dir for a path)")
     if aircraft_dir is None:
         if not (bundled_root / "aircraft" / name / f"{name}.xml").is_file():
-            raise UserError(f"--aircraft {name}: JSBSim has no such aircraft (no {name}/{name}.xml in "
-                            f"{bundled_root / 'aircraft'}); e.g. c172p, 737, J3Cub, or --aircraft-dir DIR")
+            raise UserError(
+                f"--aircraft {name}: JSBSim has no such aircraft (no {name}/{name}.xml in "
+                f"{bundled_root / 'aircraft'}); e.g. c172p, 737, J3Cub, or --aircraft-dir DIR"
+            )
         return bundled_root, None, True
     base = Path(aircraft_dir).expanduser().resolve()
     if not base.is_dir():
@@ -185,8 +186,10 @@ def _locate(name: str, aircraft_dir: str | None, bundled_root: Path) -> tuple[Pa
         return bundled_root, base, True
     if (base / f"{name}.xml").is_file():
         return bundled_root, base, False
-    raise UserError(f"--aircraft {name}: no {name}.xml in --aircraft-dir {aircraft_dir} (looked for "
-                    f"aircraft/{name}/{name}.xml, {name}/{name}.xml and {name}.xml)")
+    raise UserError(
+        f"--aircraft {name}: no {name}.xml in --aircraft-dir {aircraft_dir} (looked for "
+        f"aircraft/{name}/{name}.xml, {name}/{name}.xml and {name}.xml)"
+    )
 
 
 def _load_and_trim(jsbsim, spec: AircraftSpec):
@@ -201,8 +204,9 @@ def _load_and_trim(jsbsim, spec: AircraftSpec):
             if aircraft_path is None:
                 loaded = fdm.load_model(spec.name)
             else:
-                loaded = fdm.load_model_with_paths(spec.name, str(aircraft_path), str(root / "engine"),
-                                                   str(root / "systems"), add_name)
+                loaded = fdm.load_model_with_paths(
+                    spec.name, str(aircraft_path), str(root / "engine"), str(root / "systems"), add_name
+                )
         except jsbsim.BaseError as exc:
             loaded, error = False, str(exc)
         else:
@@ -283,27 +287,35 @@ class JSBSimFlightModel:
         self.fdm["fcs/elevator-cmd-norm"] = total
         self._command = total
         g = self.fdm.get_property_value
-        self.trim = {"alpha_deg": g("aero/alpha-deg"), "theta_deg": g("attitude/theta-deg"),
-                     "elevator_deg": self.trim_deflection, "throttle": g("fcs/throttle-cmd-norm"),
-                     "airspeed_kt": g("velocities/vc-kts"), "altitude_ft": g("position/h-sl-ft")}
+        self.trim = {
+            "alpha_deg": g("aero/alpha-deg"),
+            "theta_deg": g("attitude/theta-deg"),
+            "elevator_deg": self.trim_deflection,
+            "throttle": g("fcs/throttle-cmd-norm"),
+            "airspeed_kt": g("velocities/vc-kts"),
+            "altitude_ft": g("position/h-sl-ft"),
+        }
         self._set_turbulence(spec.turbulence)
         self.t = 0.0
         self.n = 0  # JSBSim steps taken
         self.surface = self.trim_deflection  # the deflection last put on the surface (faults included)
 
-    def _inverse(self, commands: np.ndarray, deflections: np.ndarray,
-                 total: float) -> tuple[np.ndarray, np.ndarray]:
+    def _inverse(self, commands: np.ndarray, deflections: np.ndarray, total: float) -> tuple[np.ndarray, np.ndarray]:
         """The probed map as (deflection, command), increasing, checked to be a usable static map."""
         what = f"--aircraft {self.name}"
         at_trim = float(np.interp(total, commands, deflections))  # commands increase: -1 ... 1
         if np.all(np.diff(deflections) <= 0):  # a surface that deflects negative for a positive command
             commands, deflections = commands[::-1], deflections[::-1]
         if not np.all(np.diff(deflections) >= -1e-9) or deflections[-1] - deflections[0] < 1.0:
-            raise UserError(f"{what}: its elevator is not a static, monotone function of fcs/elevator-cmd-norm "
-                            "(a fly-by-wire pitch channel?); only directly linked elevators are supported")
+            raise UserError(
+                f"{what}: its elevator is not a static, monotone function of fcs/elevator-cmd-norm "
+                "(a fly-by-wire pitch channel?); only directly linked elevators are supported"
+            )
         if abs(at_trim - self.trim_deflection) > 0.05:
-            raise UserError(f"{what}: its elevator map gives {at_trim:.3f} deg at the trim command, JSBSim's trim "
-                            f"{self.trim_deflection:.3f} deg (a pitch channel with feedback?); not supported")
+            raise UserError(
+                f"{what}: its elevator map gives {at_trim:.3f} deg at the trim command, JSBSim's trim "
+                f"{self.trim_deflection:.3f} deg (a pitch channel with feedback?); not supported"
+            )
         deg, first = np.unique(deflections, return_index=True)
         return deg, commands[first]
 
@@ -318,8 +330,9 @@ class JSBSimFlightModel:
         self.fdm["atmosphere/turbulence/milspec/severity"] = severity
 
     # -- FlightModel -------------------------------------------------------------------------------
-    def step(self, T: float, deflection: float, rate: float, f: Sequence[float] | np.ndarray,
-             d: Sequence[float] | np.ndarray) -> None:
+    def step(
+        self, T: float, deflection: float, rate: float, f: Sequence[float] | np.ndarray, d: Sequence[float] | np.ndarray
+    ) -> None:
         t_end = self.t + T
         n_end = int(math.floor(t_end / self.dt + 0.5))
         bias = float(f[0]) if len(f) else 0.0
@@ -344,8 +357,12 @@ class JSBSimFlightModel:
 
     def state(self) -> list[float]:
         g = self.fdm.get_property_value
-        return [g("aero/alpha-deg"), math.degrees(g("velocities/q-rad_sec")), g("attitude/theta-deg"),
-                g("velocities/vc-kts") * KT_TO_M_S]
+        return [
+            g("aero/alpha-deg"),
+            math.degrees(g("velocities/q-rad_sec")),
+            g("attitude/theta-deg"),
+            g("velocities/vc-kts") * KT_TO_M_S,
+        ]
 
     def outputs(self) -> Outputs:
         g = self.fdm.get_property_value
@@ -359,23 +376,38 @@ class JSBSimFlightModel:
             q_deg_s=math.degrees(g("velocities/q-rad_sec")),
             theta_deg=g("attitude/theta-deg"),
             airspeed_m_s=g("velocities/vc-kts") * KT_TO_M_S,
-            attitude=(g("attitude/phi-rad"), g("attitude/psi-rad"), g("velocities/p-rad_sec"),
-                      g("velocities/r-rad_sec")),
-            hud=(g("velocities/vg-fps") * FT_TO_M, g("attitude/psi-deg") % 360.0,
-                 int(round(100.0 * g("fcs/throttle-pos-norm"))), g("position/h-sl-meters"),
-                 g("velocities/h-dot-fps") * FT_TO_M),
+            attitude=(
+                g("attitude/phi-rad"),
+                g("attitude/psi-rad"),
+                g("velocities/p-rad_sec"),
+                g("velocities/r-rad_sec"),
+            ),
+            hud=(
+                g("velocities/vg-fps") * FT_TO_M,
+                g("attitude/psi-deg") % 360.0,
+                int(round(100.0 * g("fcs/throttle-pos-norm"))),
+                g("position/h-sl-meters"),
+                g("velocities/h-dot-fps") * FT_TO_M,
+            ),
         )
 
     def disturbance(self) -> list[float]:
         """The turbulence velocity now, north/east/down in m/s."""
         g = self.fdm.get_property_value
-        return [g("atmosphere/turb-north-fps") * FT_TO_M, g("atmosphere/turb-east-fps") * FT_TO_M,
-                g("atmosphere/turb-down-fps") * FT_TO_M]
+        return [
+            g("atmosphere/turb-north-fps") * FT_TO_M,
+            g("atmosphere/turb-east-fps") * FT_TO_M,
+            g("atmosphere/turb-down-fps") * FT_TO_M,
+        ]
 
     def truth_extras(self) -> dict:
         g = self.fdm.get_property_value
-        return {"surface": g("fcs/elevator-pos-deg"), "trim": self.trim_deflection,
-                "altitude_m": g("position/h-sl-meters"), "states": list(self.state_names)}
+        return {
+            "surface": g("fcs/elevator-pos-deg"),
+            "trim": self.trim_deflection,
+            "altitude_m": g("position/h-sl-meters"),
+            "states": list(self.state_names),
+        }
 
     def close(self) -> None:
         self.fdm = None

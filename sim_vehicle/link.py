@@ -16,7 +16,6 @@ import logging
 from collections import Counter
 from dataclasses import dataclass
 
-from monitor.wire.signing_key import load_signing_key  # shared with the monitor: one key-file format
 from monitor.wire.mavlink import (
     VEHICLE_COMPONENT,
     bump_signing_clock,
@@ -26,6 +25,7 @@ from monitor.wire.mavlink import (
     new_codec,
     sample_index,
 )
+from monitor.wire.signing_key import load_signing_key  # shared with the monitor: one key-file format
 
 __all__ = ["ReceivedCommand", "CommandDecoder", "load_signing_key"]
 

@@ -46,14 +46,15 @@ from __future__ import annotations
 import heapq
 import itertools
 from collections import Counter
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Callable, Iterator, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from monitor.model.plant import Plant
-from monitor.wire.telemetry import AircraftSample, Sample
 from monitor.wire.specs import DelaySampler, Excitation, FaultSchedule, Wind, parse_delay_spec
+from monitor.wire.telemetry import AircraftSample, Sample
 from sim_vehicle.dynamics import Airframe, LinearFlightModel
 from sim_vehicle.flight_model import FlightModel, Outputs
 from sim_vehicle.network import DOWNLINK, UPLINK, Impairment
@@ -96,10 +97,22 @@ class SampleTruth:
         """The contract's truth payload plus extras (``status``, ``tau_drawn``, ``u``, ``elevator``, ...)."""
         status = "applied" if self.tau is not None else ("late" if self.late else "lost")
         return {
-            "sysid": sysid, "k": self.k, "t": self.t, "x": self.x, "f": self.f, "d": self.d, "tau": self.tau,
-            "status": status, "tau_drawn": self.tau_drawn, "u": [self.u_end],
-            "in_force": self.in_force, "elevator": self.elevator,
-            "effectiveness": self.effectiveness, "stuck": self.stuck, "unit": unit, **self.extras,
+            "sysid": sysid,
+            "k": self.k,
+            "t": self.t,
+            "x": self.x,
+            "f": self.f,
+            "d": self.d,
+            "tau": self.tau,
+            "status": status,
+            "tau_drawn": self.tau_drawn,
+            "u": [self.u_end],
+            "in_force": self.in_force,
+            "elevator": self.elevator,
+            "effectiveness": self.effectiveness,
+            "stuck": self.stuck,
+            "unit": unit,
+            **self.extras,
         }
 
 
@@ -209,12 +222,27 @@ class Simulation:
         else:
             d, held = model.disturbance(), []
         stuck = self.fault.stuck(k)
-        self.airframe.set_interval(np.array(f), np.array(held), self.fault.effectiveness(k), stuck is not None,
-                                   None if stuck is None else stuck.value)
+        self.airframe.set_interval(
+            np.array(f),
+            np.array(held),
+            self.fault.effectiveness(k),
+            stuck is not None,
+            None if stuck is None else stuck.value,
+        )
         tau = self.delay.tau(k)
-        truth = SampleTruth(k=k, t=t, x=x, f=f, d=d, elevator=self.airframe.position,
-                            effectiveness=self.airframe.effectiveness, stuck=self.airframe.stuck, tau_drawn=tau,
-                            extras=model.truth_extras(), in_force=self.last_applied)
+        truth = SampleTruth(
+            k=k,
+            t=t,
+            x=x,
+            f=f,
+            d=d,
+            elevator=self.airframe.position,
+            effectiveness=self.airframe.effectiveness,
+            stuck=self.airframe.stuck,
+            tau_drawn=tau,
+            extras=model.truth_extras(),
+            in_force=self.last_applied,
+        )
         self._pending[k] = truth
         self.stats.samples["taken"] += 1
         self.stats.tau_drawn.append(tau)
@@ -259,10 +287,18 @@ class Simulation:
         q = measured[1] if len(measured) > 1 else 0.0
         if outputs.theta_deg is None:
             return Sample(sysid=self.sysid, k=k, t=t, alpha_deg=alpha, q_deg_s=q, elevator_deg=reported)
-        return AircraftSample(sysid=self.sysid, k=k, t=t, alpha_deg=alpha, q_deg_s=q, elevator_deg=reported,
-                              theta_deg=outputs.theta_deg, airspeed_m_s=outputs.airspeed_m_s or 0.0,
-                              attitude=outputs.attitude or (0.0, 0.0, 0.0, 0.0),
-                              hud=outputs.hud or (0.0, 0.0, 0, 0.0, 0.0))
+        return AircraftSample(
+            sysid=self.sysid,
+            k=k,
+            t=t,
+            alpha_deg=alpha,
+            q_deg_s=q,
+            elevator_deg=reported,
+            theta_deg=outputs.theta_deg,
+            airspeed_m_s=outputs.airspeed_m_s or 0.0,
+            attitude=outputs.attitude or (0.0, 0.0, 0.0, 0.0),
+            hud=outputs.hud or (0.0, 0.0, 0, 0.0, 0.0),
+        )
 
     def _measure(self, k: int, x: list[float]) -> list[float]:
         """The state as measured: seeded white noise on the linear plant's states, on an aircraft's alpha and q."""

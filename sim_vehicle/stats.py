@@ -52,8 +52,9 @@ class RunStats:
         def fmt(stats: dict) -> str:
             if not stats["count"]:
                 return "none"
-            return ("n={count} mean={mean:.4f} std={std:.4f} min={min:.4f} p50={p50:.4f} p95={p95:.4f} "
-                    "max={max:.4f} s").format(**stats)
+            return (
+                "n={count} mean={mean:.4f} std={std:.4f} min={min:.4f} p50={p50:.4f} p95={p95:.4f} max={max:.4f} s"
+            ).format(**stats)
 
         lines = [
             "sim-vehicle summary",

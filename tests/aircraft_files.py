@@ -43,7 +43,8 @@ LIMIT = 25.0
 
 # A Cessna 172's longitudinal dynamics linearised by JSBSim at 90 kt (alpha deg, q deg/s, theta deg,
 # airspeed; elevator deg), h = 0.05 s; the elevator bias is the fault.
-AIRCRAFT_PLANT = """
+AIRCRAFT_PLANT = (
+    """
 form = "continuous"
 name = "c172p-lin"
 h = 0.05
@@ -57,14 +58,20 @@ C = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0
 
 [actuator]
 limit = 25.0
-""" + SIGNALS
+"""
+    + SIGNALS
+)
 
 # Certified (fast objective) gains for that plant, from `fault-monitor design` (copied: a design takes ~10 s).
 GAINS = Gains(
-    L=np.array([[0.003314603030433173, 0.09897908009875855, 0.0026141136345877716, 0.0002492380334806095],
-                [0.05609239187170379, 1.675004004106868, 0.0442381440679786, 0.004217807476480867],
-                [0.0031628891216548063, 0.09444867238742932, 0.002494462082395018, 0.00023783006820440717],
-                [0.00014534474277291712, 0.004340214742087519, 0.00011462840958927175, 1.0929042643375828e-05]]),
+    L=np.array(
+        [
+            [0.003314603030433173, 0.09897908009875855, 0.0026141136345877716, 0.0002492380334806095],
+            [0.05609239187170379, 1.675004004106868, 0.0442381440679786, 0.004217807476480867],
+            [0.0031628891216548063, 0.09444867238742932, 0.002494462082395018, 0.00023783006820440717],
+            [0.00014534474277291712, 0.004340214742087519, 0.00011462840958927175, 1.0929042643375828e-05],
+        ]
+    ),
     M=np.array([[-0.03440933366142443, -1.0275149577033802, -0.02713746034005597, -0.002587373081002338]]),
     K1=np.array([[-0.2312986630787076, 0.042381898764746406, 0.19924310720296023, -0.1136696475876337]]),
     K2=np.array([[0.7393642343241376]]),
@@ -77,6 +84,11 @@ def aircraft_files(directory: Path, plant_text: str = AIRCRAFT_PLANT) -> tuple[P
     plant_path, gains_path = directory / "c172p-lin.toml", directory / "c172p-gains.toml"
     plant_path.write_text(plant_text)
     plant = parse_plant(plant_text, str(plant_path))
-    write_gains(gains_path, DesignResult(method="certified", gains=GAINS, gamma_e=0.0, gamma_z=0.0,
-                                         build_seconds=0, solve_seconds=0, total_seconds=0), plant)
+    write_gains(
+        gains_path,
+        DesignResult(
+            method="certified", gains=GAINS, gamma_e=0.0, gamma_z=0.0, build_seconds=0, solve_seconds=0, total_seconds=0
+        ),
+        plant,
+    )
     return plant_path, gains_path

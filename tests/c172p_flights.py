@@ -49,8 +49,9 @@ def quiet():
             os.close(saved)
 
 
-def trimmed_c172p(airspeed_kt: float = 100.0, altitude_ft: float = 3000.0, dt: float = H / STEPS_PER_SAMPLE,
-                  accurate: bool = True):
+def trimmed_c172p(
+    airspeed_kt: float = 100.0, altitude_ft: float = 3000.0, dt: float = H / STEPS_PER_SAMPLE, accurate: bool = True
+):
     """A c172p instance trimmed in level flight by JSBSim's full trim."""
     with quiet():
         jsbsim.FGJSBBase().debug_lvl = 0
@@ -94,8 +95,14 @@ class Flight:
     trim_elevator: float
 
 
-def fly(seconds: float = 60.0, lead_in: float = 5.0, tail: float = 0.0, amplitude: float = 1.0, seed: int = 0,
-        accurate: bool = True) -> Flight:
+def fly(
+    seconds: float = 60.0,
+    lead_in: float = 5.0,
+    tail: float = 0.0,
+    amplitude: float = 1.0,
+    seed: int = 0,
+    accurate: bool = True,
+) -> Flight:
     """The c172p flown by JSBSim at 120 Hz with the PRBS on its elevator, sampled at 20 Hz."""
     fdm = trimmed_c172p(accurate=accurate)
     total = fdm["fcs/elevator-cmd-norm"] + fdm["fcs/pitch-trim-cmd-norm"]
@@ -108,8 +115,12 @@ def fly(seconds: float = 60.0, lead_in: float = 5.0, tail: float = 0.0, amplitud
     rows = np.empty((len(du), 5))
     get = fdm.get_property_value
     for k, d in enumerate(du):
-        rows[k, :4] = (get("aero/alpha-deg"), get("velocities/q-rad_sec"), get("attitude/theta-rad"),
-                       get("velocities/vc-kts") * KT_TO_M_S)
+        rows[k, :4] = (
+            get("aero/alpha-deg"),
+            get("velocities/q-rad_sec"),
+            get("attitude/theta-rad"),
+            get("velocities/vc-kts") * KT_TO_M_S,
+        )
         fdm["fcs/elevator-cmd-norm"] = total + d / deg_per_command
         fdm.run()
         rows[k, 4] = get("fcs/elevator-pos-deg")  # what the surface does over this sample (the FCS has no lag)
@@ -118,8 +129,9 @@ def fly(seconds: float = 60.0, lead_in: float = 5.0, tail: float = 0.0, amplitud
     return Flight(*rows.T, trim_elevator=trim_deg)
 
 
-def write_tlog(path: Path, flight: Flight, *, hud: bool = True, sysid: int = 1, drop: float = 0.0,
-               append: bool = False) -> None:
+def write_tlog(
+    path: Path, flight: Flight, *, hud: bool = True, sysid: int = 1, drop: float = 0.0, append: bool = False
+) -> None:
     """One MAVLink 2 frame per record, 8-byte big-endian wall-clock microseconds first (MAVProxy's format).
 
     ``drop``: the share of records lost (seeded), as a lossy radio link loses them.
@@ -132,14 +144,21 @@ def write_tlog(path: Path, flight: Flight, *, hud: bool = True, sysid: int = 1, 
     with open(path, "ab" if append else "wb") as fh:
         for k in range(len(flight.alpha)):
             t_us = k * round(H * 1e6)
-            msgs = [mavlink.MAVLink_attitude_message(t_us // 1000, 0.0, float(flight.theta[k]), 0.0, 0.0,
-                                                     float(flight.q[k]), 0.0),
-                    mavlink.MAVLink_aoa_ssa_message(t_us, float(flight.alpha[k]), 0.0)]
+            msgs = [
+                mavlink.MAVLink_attitude_message(
+                    t_us // 1000, 0.0, float(flight.theta[k]), 0.0, 0.0, float(flight.q[k]), 0.0
+                ),
+                mavlink.MAVLink_aoa_ssa_message(t_us, float(flight.alpha[k]), 0.0),
+            ]
             if hud:
-                msgs.append(mavlink.MAVLink_vfr_hud_message(float(flight.airspeed[k]), float(flight.airspeed[k]), 0,
-                                                            60, 914.4, 0.0))
-            msgs.append(mavlink.MAVLink_actuator_output_status_message(t_us, 1,
-                                                                       [float(flight.elevator[k])] + [0.0] * 31))
+                msgs.append(
+                    mavlink.MAVLink_vfr_hud_message(
+                        float(flight.airspeed[k]), float(flight.airspeed[k]), 0, 60, 914.4, 0.0
+                    )
+                )
+            msgs.append(
+                mavlink.MAVLink_actuator_output_status_message(t_us, 1, [float(flight.elevator[k])] + [0.0] * 31)
+            )
             if k % 20 == 0:
                 msgs.append(mavlink.MAVLink_heartbeat_message(1, 3, 0, 0, 4, 3))
             for i, msg in enumerate(msgs):

@@ -48,9 +48,19 @@ def _group(path: Path) -> str:
 DAEMON_MODULES = {"test_readme", "test_recording_runs", "test_recorder", "test_live_sinks"}
 # modules whose tests take seconds each (designs through the CLI, margin searches, daemons); the rest of the
 # suite, `pytest -m "not slow"`, runs in well under a minute on two workers
-SLOW_MODULES = DAEMON_MODULES | {"test_threshold", "test_design", "test_design_portability", "test_losses",
-                                 "test_margin", "test_cli_offline", "test_api", "test_analyse",
-                                 "test_detectability_jsbsim", "test_multi_delay", "test_verify_output"}
+SLOW_MODULES = DAEMON_MODULES | {
+    "test_threshold",
+    "test_design",
+    "test_design_portability",
+    "test_losses",
+    "test_margin",
+    "test_cli_offline",
+    "test_api",
+    "test_analyse",
+    "test_detectability_jsbsim",
+    "test_multi_delay",
+    "test_verify_output",
+}
 
 
 def pytest_configure(config: pytest.Config) -> None:

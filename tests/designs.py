@@ -14,7 +14,7 @@ import hashlib
 import os
 import pickle
 import warnings
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 from monitor.design import run_design
@@ -31,7 +31,7 @@ def _compute(plant: Plant, method: str, objective: str | None, max_losses: int) 
         return run_design(method, plant, max_losses=max_losses, **options)
 
 
-@lru_cache(maxsize=None)
+@cache
 def designed(preset: str, method: str, objective: str | None = None, max_losses: int = 0) -> tuple[Plant, DesignResult]:
     """``(plant, result)``; callers must not mutate the result (it is shared)."""
     plant = load_plant(preset)

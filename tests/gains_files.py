@@ -20,9 +20,15 @@ from monitor.model.plant import load_plant
 def hand_made_gains_file(path: Path, plant_name: str = "paper-continuous") -> Path:
     """A hand-made stabilising-enough gains file (the table's logic does not depend on the design)."""
     plant = load_plant(plant_name)
-    gains = Gains(L=np.array([[1.8], [1.6]]), M=np.array([[0.9]]), K1=np.array([[-0.26]]), K2=np.array([[0.1]]),
-                  K3=np.array([[-1.0]]))
-    result = DesignResult(method="test", gains=gains, gamma_e=1.0, gamma_z=1.0,
-                          build_seconds=0.0, solve_seconds=0.0, total_seconds=0.0)
+    gains = Gains(
+        L=np.array([[1.8], [1.6]]),
+        M=np.array([[0.9]]),
+        K1=np.array([[-0.26]]),
+        K2=np.array([[0.1]]),
+        K3=np.array([[-1.0]]),
+    )
+    result = DesignResult(
+        method="test", gains=gains, gamma_e=1.0, gamma_z=1.0, build_seconds=0.0, solve_seconds=0.0, total_seconds=0.0
+    )
     write_gains(path, result, plant)
     return path

@@ -14,9 +14,9 @@ from __future__ import annotations
 import json
 import re
 import threading
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
 
 from tests.daemons import Daemon, free_tcp_port, wait_for
 
@@ -68,15 +68,44 @@ def zenoh_bus() -> Iterator[Bus]:
 
 
 def monitor_daemon(tmp_path: Path, gains: Path, port: int, bus: Bus, name: str, *extra: str) -> Daemon:
-    args = ["run", "--plant", "paper-continuous", "--gains", str(gains), "--mavlink", f"udpin:127.0.0.1:{port}",
-            "--zenoh-mode", "client", "--zenoh-connect", bus.endpoint, "--name", name, *extra]
+    args = [
+        "run",
+        "--plant",
+        "paper-continuous",
+        "--gains",
+        str(gains),
+        "--mavlink",
+        f"udpin:127.0.0.1:{port}",
+        "--zenoh-mode",
+        "client",
+        "--zenoh-connect",
+        bus.endpoint,
+        "--name",
+        name,
+        *extra,
+    ]
     return Daemon("monitor", args, tmp_path / f"{name}.log")
 
 
-def sim_daemon(tmp_path: Path, port: int, bus: Bus, sysid: int, *extra: str, steps: int = 60,
-               speedup: float = 25) -> Daemon:
-    args = ["run", "--sysid", str(sysid), "--steps", str(steps), "--speedup", str(speedup),
-            "--mavlink", f"udpout:127.0.0.1:{port}", "--zenoh-mode", "client", "--zenoh-connect", bus.endpoint, *extra]
+def sim_daemon(
+    tmp_path: Path, port: int, bus: Bus, sysid: int, *extra: str, steps: int = 60, speedup: float = 25
+) -> Daemon:
+    args = [
+        "run",
+        "--sysid",
+        str(sysid),
+        "--steps",
+        str(steps),
+        "--speedup",
+        str(speedup),
+        "--mavlink",
+        f"udpout:127.0.0.1:{port}",
+        "--zenoh-mode",
+        "client",
+        "--zenoh-connect",
+        bus.endpoint,
+        *extra,
+    ]
     return Daemon("sim_vehicle", args, tmp_path / f"sim{sysid}-{port}.log")
 
 

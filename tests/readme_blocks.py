@@ -90,8 +90,10 @@ class Block:
 
     def problem(self) -> str | None:
         if self.marker is None:
-            return ("no marker: put <!-- readme: run GROUP | file NAME | signals mavlink | output | not run: REASON --> "
-                    "on the line above the fence (tests/readme_blocks.py)")
+            return (
+                "no marker: put <!-- readme: run GROUP | file NAME | signals mavlink | output | not run: REASON --> "
+                "on the line above the fence (tests/readme_blocks.py)"
+            )
         if self.kind is None:
             return f"unknown marker '{self.marker}' (see tests/readme_blocks.py)"
         return None
@@ -134,7 +136,7 @@ def blocks(path: Path = README) -> tuple[Block, ...]:
             tag = _MARKER.search(lines[above])
             marker = tag.group(1) if tag else marker
             above -= 1
-        found.append(Block(i + 1, opening.group(1), "".join(line + "\n" for line in lines[i + 1:end]), marker))
+        found.append(Block(i + 1, opening.group(1), "".join(line + "\n" for line in lines[i + 1 : end]), marker))
         i = end + 1
     return tuple(found)
 
@@ -170,8 +172,10 @@ _DEFAULT_PORTS = (  # (command, flags that name the port instead, the flag and a
     (re.compile(r"^fault-monitor run\b"), ("--mavlink", "--config", "--fleet"), "--mavlink udpin:127.0.0.1:{14550}"),
     (re.compile(r"^fault-monitor router\b"), ("-l", "--listen", "-c", "--config"), "-l tcp/127.0.0.1:{7447}"),
 )
-_LONG_LIVED = re.compile(r"^(fault-monitor (run|router)\b|mavproxy\.py\b|sim-vehicle run\b(?!.*--steps)"
-                         r"|fault-monitor subscribe\b(?!.*--(count|duration)))")
+_LONG_LIVED = re.compile(
+    r"^(fault-monitor (run|router)\b|mavproxy\.py\b|sim-vehicle run\b(?!.*--steps)"
+    r"|fault-monitor subscribe\b(?!.*--(count|duration)))"
+)
 _OURS = re.compile(r"^(fault-monitor|sim-vehicle)\b")
 
 
@@ -241,13 +245,17 @@ class Session:
         self.dir.mkdir(parents=True, exist_ok=True)
         self.logs.mkdir(exist_ok=True)
         bin_dir = str(Path(sys.executable).parent)  # the console scripts of this interpreter's environment
-        self.env = {**os.environ, "PATH": bin_dir + os.pathsep + os.environ.get("PATH", ""), "RERUN_ANALYTICS": "0",
-                    "PYTHONUNBUFFERED": "1"}
+        self.env = {
+            **os.environ,
+            "PATH": bin_dir + os.pathsep + os.environ.get("PATH", ""),
+            "RERUN_ANALYTICS": "0",
+            "PYTHONUNBUFFERED": "1",
+        }
         for block in blocks():
             if block.kind == "file":
                 (self.dir / Path(block.arg("name")).name).write_text(self.rewrite_ports(block.text))
 
-    def __enter__(self) -> "Session":
+    def __enter__(self) -> Session:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -269,14 +277,16 @@ class Session:
             words = shlex.split(command, comments=True)
             if pattern.match(command) and not any(w.split("=")[0] in naming for w in words):
                 spelled = re.sub(r"\{(\d+)\}", lambda m: str(self.port(int(m.group(1)))), default)
-                command = f"{pattern.match(command).group(0)} {spelled}{command[pattern.match(command).end():]}"
+                command = f"{pattern.match(command).group(0)} {spelled}{command[pattern.match(command).end() :]}"
         if self.steps is not None:
             command = re.sub(r"--steps[ =](\d+)", lambda m: f"--steps {min(int(m.group(1)), self.steps)}", command)
         if self.speedup is not None:
-            command = re.sub(r"--speedup[ =]([\d.e+]+)",
-                             lambda m: f"--speedup {max(float(m.group(1)), self.speedup):g}", command)
-        return re.sub(r"--duration[ =]([\d.]+)", lambda m: f"--duration {min(float(m.group(1)), self.duration):g}",
-                      command)
+            command = re.sub(
+                r"--speedup[ =]([\d.e+]+)", lambda m: f"--speedup {max(float(m.group(1)), self.speedup):g}", command
+            )
+        return re.sub(
+            r"--duration[ =]([\d.]+)", lambda m: f"--duration {min(float(m.group(1)), self.duration):g}", command
+        )
 
     # running --------------------------------------------------------------------------------------------------------
     def run(self, block: Block, background: bool | None = None) -> list[Step]:
@@ -287,8 +297,12 @@ class Session:
             looping = "while True" in block.text
             script = self.logs / f"block-{block.line}.py"
             script.write_text(self.rewrite_ports(block.text))
-            step = self._start(block, block.line, f"{shlex.quote(sys.executable)} {shlex.quote(str(script))}",
-                               looping if background is None else background)
+            step = self._start(
+                block,
+                block.line,
+                f"{shlex.quote(sys.executable)} {shlex.quote(str(script))}",
+                looping if background is None else background,
+            )
             return [step]
         skip = block.arg("skip")
         steps = []
@@ -301,8 +315,9 @@ class Session:
             bg = ampersand or bool(_LONG_LIVED.match(command))
             steps.append(self._start(block, line, command, bg if background is None else background))
         if skip:
-            assert any(c.startswith(skip) for _l, c in block.commands()), \
+            assert any(c.startswith(skip) for _l, c in block.commands()), (
                 f"README.md:{block.line}: the marker skips '{skip}', which the block does not have"
+            )
         return steps
 
     def again(self, step: Step) -> Step:
@@ -316,9 +331,15 @@ class Session:
         lexer.commenters = "#"
         simple = not {"&&", "||", ";", "|", "&"} & set(lexer)  # one command: bash execs it, so it gets the signals
         with open(out, "wb") as fo, open(err, "wb") as fe:
-            proc = subprocess.Popen(["bash", "-c", f"exec {command}" if simple else command], cwd=self.dir,
-                                    env=self.env, stdin=subprocess.DEVNULL, stdout=fo, stderr=fe,
-                                    start_new_session=True)
+            proc = subprocess.Popen(
+                ["bash", "-c", f"exec {command}" if simple else command],
+                cwd=self.dir,
+                env=self.env,
+                stdin=subprocess.DEVNULL,
+                stdout=fo,
+                stderr=fe,
+                start_new_session=True,
+            )
         step = Step(block, line, command, proc, out, err, background)
         self.steps_run.append(step)
         if background:

@@ -20,8 +20,9 @@ from monitor.service.records import SampleRecord, TruthRecord  # noqa: E402
 ONSET, SIZE, LAG = 20, 2.0, 5
 
 
-def make_run(sysid: int, n: int = 200, onset: int = ONSET, size: float = SIZE, lag: int = LAG,
-             skip: frozenset[int] = frozenset()) -> tuple[list[SampleRecord], list[TruthRecord]]:
+def make_run(
+    sysid: int, n: int = 200, onset: int = ONSET, size: float = SIZE, lag: int = LAG, skip: frozenset[int] = frozenset()
+) -> tuple[list[SampleRecord], list[TruthRecord]]:
     """A hand-made run: f steps to ``size`` at ``onset``, f_hat follows ``lag`` steps later, alarm with it.
 
     Every field differs per sample and per vehicle, so a misplaced row would be caught. Samples in
@@ -35,18 +36,31 @@ def make_run(sysid: int, n: int = 200, onset: int = ONSET, size: float = SIZE, l
         if k in skip:
             continue
         f_hat = size if k >= onset + lag else 0.0
-        samples.append(SampleRecord(
-            sysid=sysid, k=k, t=0.5 * k, wall=1.7e9 + 0.5 * k + 0.001 * sysid,
-            y=[0.1 * k + sysid, -0.2 * k], alpha=math.sin(k / 7) * sysid, q=math.cos(k / 5),
-            elevator=None if k % 2 else 0.3 * k, x_hat=[0.01 * k, 0.02 * k + sysid], f_hat=[f_hat],
-            u=[-0.05 * k], residual=[1e-3 * k, -1e-3 * k], tau_obs=None if k == 0 else 0.01 * (k % 40),
-            processing_s=1e-5 * (1 + k % 9), alarm=k >= onset + 3,
-        ))
+        samples.append(
+            SampleRecord(
+                sysid=sysid,
+                k=k,
+                t=0.5 * k,
+                wall=1.7e9 + 0.5 * k + 0.001 * sysid,
+                y=[0.1 * k + sysid, -0.2 * k],
+                alpha=math.sin(k / 7) * sysid,
+                q=math.cos(k / 5),
+                elevator=None if k % 2 else 0.3 * k,
+                x_hat=[0.01 * k, 0.02 * k + sysid],
+                f_hat=[f_hat],
+                u=[-0.05 * k],
+                residual=[1e-3 * k, -1e-3 * k],
+                tau_obs=None if k == 0 else 0.01 * (k % 40),
+                processing_s=1e-5 * (1 + k % 9),
+                alarm=k >= onset + 3,
+            )
+        )
     return samples, truth
 
 
-def write_run(path: Path, sysids: tuple[int, ...] = (1, 2), n: int = 200, truth: bool = True,
-              **run: object) -> dict[int, tuple[list[SampleRecord], list[TruthRecord]]]:
+def write_run(
+    path: Path, sysids: tuple[int, ...] = (1, 2), n: int = 200, truth: bool = True, **run: object
+) -> dict[int, tuple[list[SampleRecord], list[TruthRecord]]]:
     """Record ``make_run`` for each vehicle, interleaved as a live loop would, and close the file."""
     runs = {s: make_run(s, n, **run) for s in sysids}
     with RrdRecorder(path, properties={"plant": "paper", "plant_hash": "abc123", "gains_L": "[[1.87], [1.63]]"}) as rec:

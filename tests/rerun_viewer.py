@@ -32,9 +32,14 @@ def viewer_binary() -> str:
 def headless_viewer(tmp_path: Path, port: int, out: Path) -> Iterator[subprocess.Popen]:
     """``rerun --save OUT`` on loopback ``port``: stores whatever is streamed to it; always stopped."""
     log = open(tmp_path / f"viewer-{port}.log", "wb")
-    proc = subprocess.Popen([viewer_binary(), "--bind", "127.0.0.1", "--port", str(port), "--save", str(out)],
-                            stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
-                            env={**os.environ, "RERUN_ANALYTICS": "0"})
+    proc = subprocess.Popen(
+        [viewer_binary(), "--bind", "127.0.0.1", "--port", str(port), "--save", str(out)],
+        stdin=subprocess.DEVNULL,
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        start_new_session=True,
+        env={**os.environ, "RERUN_ANALYTICS": "0"},
+    )
     try:
         wait_for(lambda: viewer_answers("127.0.0.1", port) or proc.poll() is not None, 15, what="viewer listening")
         assert proc.poll() is None, (tmp_path / f"viewer-{port}.log").read_text(errors="replace")

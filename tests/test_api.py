@@ -33,8 +33,12 @@ def test_the_readme_python_block_runs_as_it_stands_in_a_fresh_directory(tmp_path
 
 
 def test_importing_monitor_stays_cheap_and_unknown_names_fail_clearly():
-    out = subprocess.run([sys.executable, "-c", "import sys, monitor; print('scipy' in sys.modules)"],
-                         capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-c", "import sys, monitor; print('scipy' in sys.modules)"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.stdout.strip() == "False"  # the daemons import monitor.* without the design stack
     with pytest.raises(AttributeError, match="no attribute 'desing'"):
         monitor.desing  # noqa: B018
@@ -42,6 +46,7 @@ def test_importing_monitor_stays_cheap_and_unknown_names_fail_clearly():
 
 def test_a_python_control_statespace_is_accepted():
     import control  # in the test extra: this test runs in CI, it never skips
+
     sys_ = control.ss([[-1.0, 1.0], [0.0, -3.0]], [[0.0, 0.0, 0.5], [2.0, 1.0, 1.0]], [[1.0, 0.0]], [[0.0, 0.0, 0.0]])
     plant = monitor.api.plant_from_statespace(sys_, h=1.0, tau_max=0.3)
     assert np.allclose(plant.continuous.D_cd, [[0.5], [1.0]])

@@ -38,7 +38,9 @@ def test_verify_json_agrees_with_the_design(certified_gains):
     v = json.loads(proc.stdout)
     assert v["stable"] is True and v["certificate_valid"] is True
     assert {"stable", "rho_max", "tau_worst", "hinf_ef", "hinf_y"} <= set(v)
-    assert v["hinf_ef"] <= json.loads(json.dumps(tomllib.loads(certified_gains.read_text())["gains"]["gamma_e"])) * (1 + 1e-6)
+    assert v["hinf_ef"] <= json.loads(json.dumps(tomllib.loads(certified_gains.read_text())["gains"]["gamma_e"])) * (
+        1 + 1e-6
+    )
 
 
 def test_verify_exits_nonzero_for_the_published_gains():
@@ -49,8 +51,10 @@ def test_verify_exits_nonzero_for_the_published_gains():
 
 def test_failed_design_leaves_no_file(tmp_path):
     plant = tmp_path / "unobservable.toml"
-    plant.write_text('form="discrete"\nh=1.0\ntau_min=0.0\ntau_max=0.3\nA=[[0.5, 0.1], [0.0, 0.4]]\nB0=[[0.2], [0.3]]\n'
-                     'B1=[[0.1], [0.1]]\nC=[[0.0, 0.0]]\nDf=[[0.2], [0.2]]\nDd=[[0.0], [0.2]]\nE=[[0.0], [1.0]]\n')
+    plant.write_text(
+        'form="discrete"\nh=1.0\ntau_min=0.0\ntau_max=0.3\nA=[[0.5, 0.1], [0.0, 0.4]]\nB0=[[0.2], [0.3]]\n'
+        "B1=[[0.1], [0.1]]\nC=[[0.0, 0.0]]\nDf=[[0.2], [0.2]]\nDd=[[0.0], [0.2]]\nE=[[0.0], [1.0]]\n"
+    )
     out = tmp_path / "g.toml"
     proc = fm("design", "--plant", str(plant), "--method", "paper", "--out", str(out))
     assert proc.returncode not in (0, 1) and not out.exists()

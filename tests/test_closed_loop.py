@@ -58,7 +58,12 @@ def test_polytope_contains_the_whole_delay_curve(preset):
     V = np.array([v.ravel() for v in b0_polytope(p)])
     for t in tau_grid(p, 301):
         pt = b0_of_tau(p, float(t)).ravel()
-        res = linprog(np.zeros(len(V)), A_eq=np.vstack([V.T, np.ones((1, len(V)))]), b_eq=np.append(pt, 1), bounds=[(0, None)] * len(V))
+        res = linprog(
+            np.zeros(len(V)),
+            A_eq=np.vstack([V.T, np.ones((1, len(V)))]),
+            b_eq=np.append(pt, 1),
+            bounds=[(0, None)] * len(V),
+        )
         assert res.status == 0, f"B0({t}) outside the polytope"
 
 
@@ -76,8 +81,12 @@ def test_the_prism_holds_every_point_of_a_thin_cloud_with_2_dim_vertices():
         V = _oriented_prism(cloud)
         assert len(V) <= 2 * dim
         for pt in cloud:
-            res = linprog(np.zeros(len(V)), A_eq=np.vstack([V.T, np.ones((1, len(V)))]), b_eq=np.append(pt, 1),
-                          bounds=[(0, None)] * len(V))
+            res = linprog(
+                np.zeros(len(V)),
+                A_eq=np.vstack([V.T, np.ones((1, len(V)))]),
+                b_eq=np.append(pt, 1),
+                bounds=[(0, None)] * len(V),
+            )
             assert res.status == 0, f"a cloud point outside the prism (dim {dim})"
 
 

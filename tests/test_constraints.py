@@ -34,8 +34,9 @@ def test_every_dependency_is_pinned_inside_its_range():
     for req in _requirements():
         name = canonicalize_name(req.name)
         assert name in pins, f"{req.name} is a dependency but has no pin in constraints.txt"
-        assert req.specifier.contains(pins[name], prereleases=True), \
+        assert req.specifier.contains(pins[name], prereleases=True), (
             f"constraints.txt pins {req.name}=={pins[name]}, outside pyproject's {req.specifier}"
+        )
 
 
 def test_the_environment_running_the_tests_is_the_pinned_one():
@@ -43,4 +44,6 @@ def test_the_environment_running_the_tests_is_the_pinned_one():
     pins = _pins()
     for req in _requirements():
         name = canonicalize_name(req.name)
-        assert metadata.version(req.name) == pins[name], f"{req.name}: installed {metadata.version(req.name)}, pinned {pins[name]}"
+        assert metadata.version(req.name) == pins[name], (
+            f"{req.name}: installed {metadata.version(req.name)}, pinned {pins[name]}"
+        )

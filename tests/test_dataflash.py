@@ -22,8 +22,19 @@ from monitor.cli import main
 from tests.dataflash_formats import FORMATS
 
 HEAD = b"\xa3\x95"
-_STRUCT = {"B": "B", "H": "H", "I": "I", "Q": "Q", "f": "f", "c": "h", "C": "H", "h": "h", "n": "4s", "N": "16s",
-           "Z": "64s"}
+_STRUCT = {
+    "B": "B",
+    "H": "H",
+    "I": "I",
+    "Q": "Q",
+    "f": "f",
+    "c": "h",
+    "C": "H",
+    "h": "h",
+    "n": "4s",
+    "N": "16s",
+    "Z": "64s",
+}
 _MULT = {"c": 100.0, "C": 100.0}  # stored as hundredths: DFReader divides by 100
 ARDUPLANE_MAP = """
 [signals]
@@ -60,11 +71,12 @@ def write_dataflash(path: Path, samples: list[dict[str, float]], h: float, seed:
         base = T0_US + round(k * h * 1e6)
         pwm = int(s["pwm"])
         for name, values in (
-                ("ATT", [0.0, 0.0, s["theta"], s["theta"], 90.0, 90.0, 0.0, 0.0]),
-                ("RATE", [0.0, 0.0, 0.0, s["q"], s["q"], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
-                ("AOA", [s["alpha"], 0.0]),
-                ("RCOU", [1500, pwm, 1200, 1500] + [0] * 10),
-                ("ARSP", [0, s.get("airspeed", 25.0), 100.0, 20.0])):
+            ("ATT", [0.0, 0.0, s["theta"], s["theta"], 90.0, 90.0, 0.0, 0.0]),
+            ("RATE", [0.0, 0.0, 0.0, s["q"], s["q"], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+            ("AOA", [s["alpha"], 0.0]),
+            ("RCOU", [1500, pwm, 1200, 1500] + [0] * 10),
+            ("ARSP", [0, s.get("airspeed", 25.0), 100.0, 20.0]),
+        ):
             t = base + rng.randint(0, 8000)
             records.append((t, name, [t, *values]))
     records.sort(key=lambda r: r[0])
@@ -74,8 +86,9 @@ def write_dataflash(path: Path, samples: list[dict[str, float]], h: float, seed:
             length = 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in fmt))
             lines.append(f"FMT, {mtype}, {length}, {name}, {fmt}, {cols}")
         for _t, name, values in records:
-            cells = [v.decode() if isinstance(v, bytes) else (f"{v:.9g}" if isinstance(v, float) else str(v))
-                     for v in values]
+            cells = [
+                v.decode() if isinstance(v, bytes) else (f"{v:.9g}" if isinstance(v, float) else str(v)) for v in values
+            ]
             lines.append(", ".join([name, *cells]))
         path.write_text("\n".join(lines) + "\n")
         return
@@ -141,15 +154,27 @@ def test_the_written_log_is_a_dataflash_log_pymavlink_reads(flight) -> None:
         first.setdefault(m.get_type(), m)
     n = len(flight["samples"])
     assert {k: counts[k] for k in ("ATT", "RATE", "AOA", "RCOU", "ARSP")} == dict.fromkeys(
-        ("ATT", "RATE", "AOA", "RCOU", "ARSP"), n)
+        ("ATT", "RATE", "AOA", "RCOU", "ARSP"), n
+    )
     assert first["ATT"].Pitch == pytest.approx(2.0) and first["AOA"].AOA == pytest.approx(2.0)
     assert first["RCOU"].C2 == 1450 and first["PARM"].Name == "SYSID_THISMAV"
 
 
 def test_identify_a_dataflash_log_with_arduplanes_signal_map(flight, capsys) -> None:
     out = flight["work"] / "sp.toml"
-    code = main(["identify", str(flight["bin"]), "--signals", str(flight["map"]), "--model", "short-period",
-                 "--out", str(out), "--json"])
+    code = main(
+        [
+            "identify",
+            str(flight["bin"]),
+            "--signals",
+            str(flight["map"]),
+            "--model",
+            "short-period",
+            "--out",
+            str(out),
+            "--json",
+        ]
+    )
     captured = capsys.readouterr()
     assert code == 0, captured.err
     report = json.loads(captured.out)
@@ -203,18 +228,21 @@ def test_analyse_gives_the_same_estimates_from_a_dataflash_log_and_a_tlog(tmp_pa
                 msg = mavlink.MAVLink_servo_output_raw_message(m.TimeUS, 0, m.C1, m.C2, m.C3, m.C4, 0, 0, 0, 0)
             codec.send(msg)
             fh.write(struct.pack(">Q", 1_700_000_000_000_000 + m.TimeUS) + codec.file.take())
-    (tmp_path / "df.toml").write_text('[signals]\ninstant = "RCOU"\noutputs = ["alpha"]\nactuator = ["elevator"]\n'
-                                      '[signals.measured]\nalpha = { field = "AOA.AOA", unit = "deg" }\n'
-                                      'elevator = { field = "RCOU.C2", scale = 0.06, offset = -90.0, unit = "deg" }\n')
+    (tmp_path / "df.toml").write_text(
+        '[signals]\ninstant = "RCOU"\noutputs = ["alpha"]\nactuator = ["elevator"]\n'
+        '[signals.measured]\nalpha = { field = "AOA.AOA", unit = "deg" }\n'
+        'elevator = { field = "RCOU.C2", scale = 0.06, offset = -90.0, unit = "deg" }\n'
+    )
     (tmp_path / "tlog.toml").write_text(
         '[signals]\ninstant = "SERVO_OUTPUT_RAW"\noutputs = ["alpha"]\nactuator = ["elevator"]\n[signals.measured]\n'
         'alpha = { field = "AOA_SSA.AOA", unit = "deg" }\n'
-        'elevator = { field = "SERVO_OUTPUT_RAW.servo2_raw", scale = 0.06, offset = -90.0, unit = "deg" }\n')
+        'elevator = { field = "SERVO_OUTPUT_RAW.servo2_raw", scale = 0.06, offset = -90.0, unit = "deg" }\n'
+    )
     gains = hand_made_gains_file(tmp_path / "gains.toml")
     from monitor.link.dataflash import open_dataflash
     from monitor.service.alarm import AlarmConfig
-    from monitor.service.offline import analyse_dataflash, analyse_log
     from monitor.service.fleet_file import Fleet, load_model
+    from monitor.service.offline import analyse_dataflash, analyse_log
 
     f_hat = {}
     for log in (dataflash, text):
@@ -225,43 +253,89 @@ def test_analyse_gives_the_same_estimates_from_a_dataflash_log_and_a_tlog(tmp_pa
     f_hat[".tlog"] = [r.f_hat[0] for r in analyse_log(tlog, fleet, AlarmConfig()).records]
     assert f_hat[".bin"] == f_hat[".tlog"] and len(f_hat[".bin"]) == 60
     assert f_hat[".log"] == pytest.approx(f_hat[".bin"], rel=1e-6, abs=1e-6)  # text: values as printed, 9 digits
-    code = main(["analyse", str(dataflash), "--plant", "paper-continuous", "--gains", str(gains), "--signals",
-                 str(tmp_path / "df.toml"), "--json"])
+    code = main(
+        [
+            "analyse",
+            str(dataflash),
+            "--plant",
+            "paper-continuous",
+            "--gains",
+            str(gains),
+            "--signals",
+            str(tmp_path / "df.toml"),
+            "--json",
+        ]
+    )
     report = json.loads(capsys.readouterr().out)
     assert code == 0 and report["samples"] == 60
     inv = report["log"]["inventory"]
     assert inv["kind"] == "dataflash" and {m["name"] for m in inv["messages"]} >= {"ATT", "RATE", "AOA", "RCOU"}
-    code = main(["analyse", str(dataflash), "--plant", "paper-continuous", "--gains", str(gains), "--signals",
-                 str(tmp_path / "df.toml")])
+    code = main(
+        [
+            "analyse",
+            str(dataflash),
+            "--plant",
+            "paper-continuous",
+            "--gains",
+            str(gains),
+            "--signals",
+            str(tmp_path / "df.toml"),
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 0 and "log holds: 309 DataFlash records over 59.5 s of TimeUS, 7 messages" in out, out
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["analyse", "{bin}", "--plant", "paper-continuous", "--gains", "{gains}"],
-     "a DataFlash log names its own messages: give a signal map of them with --signals FILE"),
-    (["analyse", "{bin}", "--plant", "paper-continuous", "--gains", "{gains}", "--signals", "{mav}"],
-     "unknown DataFlash message 'AOA_SSA' (this log's messages: AOA, ARSP, ATT, CTUN, FMT, PARM, RATE, RCOU)"),
-    (["analyse", "{bin}", "--plant", "paper-continuous", "--gains", "{gains}", "--signals", "{ctun}"],
-     "missing signals: alpha (CTUN.Pitch): the log has no CTUN; what the log has instead: angle of attack: AOA 49"),
-    (["identify", "{bin}", "--out", "{work}/p.toml"],
-     "a DataFlash log names its own messages: give a signal map of them with --signals FILE"),
-    (["identify", "{empty}", "--out", "{work}/p.toml", "--signals", "{map}"], "holds no data records"),
-    (["identify", "{bin}", "--out", "{work}/p.toml", "--signals", "{map}", "--sysid", "0"], "--sysid must be"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (
+            ["analyse", "{bin}", "--plant", "paper-continuous", "--gains", "{gains}"],
+            "a DataFlash log names its own messages: give a signal map of them with --signals FILE",
+        ),
+        (
+            ["analyse", "{bin}", "--plant", "paper-continuous", "--gains", "{gains}", "--signals", "{mav}"],
+            "unknown DataFlash message 'AOA_SSA' (this log's messages: AOA, ARSP, ATT, CTUN, FMT, PARM, RATE, RCOU)",
+        ),
+        (
+            ["analyse", "{bin}", "--plant", "paper-continuous", "--gains", "{gains}", "--signals", "{ctun}"],
+            "missing signals: alpha (CTUN.Pitch): the log has no CTUN; what the log has instead: angle of attack: AOA 49",
+        ),
+        (
+            ["identify", "{bin}", "--out", "{work}/p.toml"],
+            "a DataFlash log names its own messages: give a signal map of them with --signals FILE",
+        ),
+        (["identify", "{empty}", "--out", "{work}/p.toml", "--signals", "{map}"], "holds no data records"),
+        (["identify", "{bin}", "--out", "{work}/p.toml", "--signals", "{map}", "--sysid", "0"], "--sysid must be"),
+    ],
+)
 def test_dataflash_mistakes_are_one_line_exit_2(flight, tmp_path: Path, capsys, argv, message) -> None:
     from tests.gains_files import hand_made_gains_file
 
     gains = hand_made_gains_file(tmp_path / "gains.toml")
-    (tmp_path / "mav.toml").write_text('[signals]\ninstant = "AOA_SSA"\noutputs = ["alpha"]\nactuator = ["e"]\n'
-                                       '[signals.measured]\nalpha = { field = "AOA_SSA.AOA" }\n'
-                                       'e = { field = "RCOU.C2" }\n')
-    (tmp_path / "ctun.toml").write_text('[signals]\ninstant = "RCOU"\noutputs = ["alpha"]\nactuator = ["e"]\n'
-                                        '[signals.measured]\nalpha = { field = "CTUN.Pitch" }\ne = { field = "RCOU.C2" }\n')
+    (tmp_path / "mav.toml").write_text(
+        '[signals]\ninstant = "AOA_SSA"\noutputs = ["alpha"]\nactuator = ["e"]\n'
+        '[signals.measured]\nalpha = { field = "AOA_SSA.AOA" }\n'
+        'e = { field = "RCOU.C2" }\n'
+    )
+    (tmp_path / "ctun.toml").write_text(
+        '[signals]\ninstant = "RCOU"\noutputs = ["alpha"]\nactuator = ["e"]\n'
+        '[signals.measured]\nalpha = { field = "CTUN.Pitch" }\ne = { field = "RCOU.C2" }\n'
+    )
     empty = tmp_path / "empty.bin"
     empty.write_bytes(_fmt_fmt() + _fmt("AOA"))
-    args = [a.format(bin=flight["bin"], gains=gains, mav=tmp_path / "mav.toml", ctun=tmp_path / "ctun.toml",
-                     work=tmp_path, empty=empty, map=flight["map"]) for a in argv]
+    args = [
+        a.format(
+            bin=flight["bin"],
+            gains=gains,
+            mav=tmp_path / "mav.toml",
+            ctun=tmp_path / "ctun.toml",
+            work=tmp_path,
+            empty=empty,
+            map=flight["map"],
+        )
+        for a in argv
+    ]
     code = main(args)
     err = capsys.readouterr().err.strip().splitlines()
     errors = [line for line in err if "error" in line]
@@ -269,17 +343,27 @@ def test_dataflash_mistakes_are_one_line_exit_2(flight, tmp_path: Path, capsys, 
     assert not any("Traceback" in line for line in err)
 
 
-def test_a_damaged_dataflash_log_gives_its_good_records_and_one_warning(flight, tmp_path: Path, capsys,
-                                                                         caplog) -> None:
+def test_a_damaged_dataflash_log_gives_its_good_records_and_one_warning(flight, tmp_path: Path, capsys, caplog) -> None:
     """Garbage in the middle of the log (a torn write): pymavlink skips it and says so on stderr; the monitor keeps
     its stdout clean (--json) and says it in one WARNING; the records around the damage still make samples."""
     data = flight["bin"].read_bytes()
     cut = len(data) // 2
     damaged = tmp_path / "damaged.bin"
-    damaged.write_bytes(data[:cut] + bytes(range(1, 200)) * 4 + data[cut + 800:])  # ~20 records overwritten
+    damaged.write_bytes(data[:cut] + bytes(range(1, 200)) * 4 + data[cut + 800 :])  # ~20 records overwritten
     out = tmp_path / "p.toml"
-    code = main(["identify", str(damaged), "--signals", str(flight["map"]), "--model", "short-period", "--out",
-                 str(out), "--json"])
+    code = main(
+        [
+            "identify",
+            str(damaged),
+            "--signals",
+            str(flight["map"]),
+            "--model",
+            "short-period",
+            "--out",
+            str(out),
+            "--json",
+        ]
+    )
     captured = capsys.readouterr()
     report = json.loads(captured.out)
     assert code == 0 and len(flight["samples"]) - 6 <= report["samples"]["log"] < len(flight["samples"])

@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from monitor.model.closed_loop import steady_state
 from monitor.demo import montecarlo
 from monitor.demo.live import Scenario
 from monitor.demo.methods import METHODS, look
@@ -21,14 +20,21 @@ from monitor.demo.steady import held_output_steady_state, q_caption
 from monitor.design.result import DesignResult
 from monitor.errors import DesignFailed, UserError, run_cli_command
 from monitor.model import simulate as loop
+from monitor.model.closed_loop import steady_state
 from monitor.model.plant import Plant, load_plant
 from monitor.wire.specs import parse_delay_spec, parse_fault_spec, parse_wind_spec
 from tests.designs import designed
 
 
 def _run(plant, gains, seed: int) -> loop.Trace:
-    return loop.simulate(plant, gains, 100, parse_fault_spec("bias:2@20"), parse_delay_spec("uniform:0:0.46", seed),
-                         parse_wind_spec("paper", plant.h, seed).values())
+    return loop.simulate(
+        plant,
+        gains,
+        100,
+        parse_fault_spec("bias:2@20"),
+        parse_delay_spec("uniform:0:0.46", seed),
+        parse_wind_spec("paper", plant.h, seed).values(),
+    )
 
 
 def test_monte_carlo_clips_the_elevator_as_the_live_vehicle_does():
@@ -77,21 +83,35 @@ SHORT = Scenario(steps=40, fault="bias:2@10")
 
 def _failing(*broken: str):
     """The project's designs (computed once per session), except that ``broken`` fail as on the issue's machine."""
+
     def design(method: str, plant: Plant) -> DesignResult:
         if method in broken:
             raise DesignFailed(f"{method} method, observer LMI: solver status optimal_inaccurate;\nno gains written")
         return designed(SHORT.plant, method)[1]
+
     return design
 
 
 def _fly_in_simulation(d: Designed, scenario: Scenario, out: Path, progress) -> Flown:
     """The live run's stand-in: the same scenario simulated (no daemons, no sockets), scored the same way."""
     plant = load_plant(scenario.plant)
-    trace, s = montecarlo.run_scenario(plant, d.gains.gains, scenario.steps, scenario.fault, scenario.delay,
-                                       scenario.wind, scenario.seed)
-    row = Row(d.method, d.stable, d.certificate, d.claim("gamma_e"), d.claim("gamma_z"), samples=int(trace.k.size),
-              settling_steps=s.settling_steps, rms_ef=s.rms_ef, peak_alpha_after=s.peak_alpha_after,
-              rms_alpha_after=s.rms_alpha_after, alarm_delay=None, false_alarms=0)
+    trace, s = montecarlo.run_scenario(
+        plant, d.gains.gains, scenario.steps, scenario.fault, scenario.delay, scenario.wind, scenario.seed
+    )
+    row = Row(
+        d.method,
+        d.stable,
+        d.certificate,
+        d.claim("gamma_e"),
+        d.claim("gamma_z"),
+        samples=int(trace.k.size),
+        settling_steps=s.settling_steps,
+        rms_ef=s.rms_ef,
+        peak_alpha_after=s.peak_alpha_after,
+        rms_alpha_after=s.rms_alpha_after,
+        alarm_delay=None,
+        false_alarms=0,
+    )
     return Flown(row, trace, {"simulated": True})
 
 
@@ -102,8 +122,9 @@ def test_a_failed_baseline_design_is_a_row_and_the_demo_goes_on(tmp_path, capsys
     rows = {r["method"]: r for r in json.loads((tmp_path / "summary.json").read_text())["rows"]}
     assert list(rows) == list(METHODS)  # every design has its row, in the table's order
     failed = rows["separate"]
-    assert failed["failure"] == ("design failed: separate method, observer LMI: solver status optimal_inaccurate; "
-                                 "no gains written")  # one line
+    assert failed["failure"] == (
+        "design failed: separate method, observer LMI: solver status optimal_inaccurate; no gains written"
+    )  # one line
     assert failed["stable"] is None and failed["samples"] is None  # no verdict, no run: nothing made up
     for m in ("certified", "robust-separate", "paper"):
         assert rows[m]["failure"] is None and rows[m]["stable"] is True and rows[m]["samples"] == SHORT.steps
@@ -140,8 +161,23 @@ def test_a_failed_row_widens_no_column():
 
 
 def test_aircraft_rows_add_the_model_and_the_late_window():
-    ran = Row("certified", True, "valid", 2.49, 16.6, 900, 28, 0.102, 0.92, 0.41, 3, 0, model="longitudinal",
-              ef_late=0.00039, alpha_late=-0.002)
+    ran = Row(
+        "certified",
+        True,
+        "valid",
+        2.49,
+        16.6,
+        900,
+        28,
+        0.102,
+        0.92,
+        0.41,
+        3,
+        0,
+        model="longitudinal",
+        ef_late=0.00039,
+        alpha_late=-0.002,
+    )
     lines = format_table([ran, Row.failed("separate", "design failed: why", "short-period")]).splitlines()
     head = lines[0].split("  ")
     assert head[0].strip() == "model" and "|e_f| 30 s after, deg" in lines[0] and "alpha 30 s after, deg" in lines[0]

@@ -7,18 +7,23 @@ import warnings
 import numpy as np
 import pytest
 
-from monitor.model.closed_loop import Gains, closed_loop, observer_indices
+from monitor.checks.verify import verify_gains
 from monitor.design import run_design
 from monitor.design.paper import lemma3_K2_K3
 from monitor.errors import DesignFailed
+from monitor.model.closed_loop import Gains, closed_loop, observer_indices
 from monitor.model.plant import load_plant, parse_plant
-from monitor.checks.verify import verify_gains
 from tests.designs import designed
 
-@pytest.mark.parametrize("preset, objective, gamma_max, rho_bound", [
-    ("paper", "fast", 2.4, 0.85), ("paper-continuous", "fast", 2.4, 0.85),
-    ("paper-continuous", "hinf", 2.0, 0.8),  # ~3 s a design: one preset is enough (the benchmark runs both)
-])
+
+@pytest.mark.parametrize(
+    "preset, objective, gamma_max, rho_bound",
+    [
+        ("paper", "fast", 2.4, 0.85),
+        ("paper-continuous", "fast", 2.4, 0.85),
+        ("paper-continuous", "hinf", 2.0, 0.8),  # ~3 s a design: one preset is enough (the benchmark runs both)
+    ],
+)
 def test_certified_design_is_certified_stable_and_meets_its_bound(preset, objective, gamma_max, rho_bound):
     plant, result = designed(preset, "certified", objective)
     assert result.objective == objective
@@ -104,8 +109,10 @@ def test_separate_design_is_stable_only_at_the_nominal_delay(preset):
 
 def test_infeasible_design_fails_cleanly():
     # C = 0: neither the state nor the fault is observable, so no observer exists.
-    text = 'form="discrete"\nh=1.0\ntau_min=0.0\ntau_max=0.3\nA=[[0.5, 0.1], [0.0, 0.4]]\nB0=[[0.2], [0.3]]\n' \
-           'B1=[[0.1], [0.1]]\nC=[[0.0, 0.0]]\nDf=[[0.2], [0.2]]\nDd=[[0.0], [0.2]]\nE=[[0.0], [1.0]]\n'
+    text = (
+        'form="discrete"\nh=1.0\ntau_min=0.0\ntau_max=0.3\nA=[[0.5, 0.1], [0.0, 0.4]]\nB0=[[0.2], [0.3]]\n'
+        "B1=[[0.1], [0.1]]\nC=[[0.0, 0.0]]\nDf=[[0.2], [0.2]]\nDd=[[0.0], [0.2]]\nE=[[0.0], [1.0]]\n"
+    )
     plant = parse_plant(text, source="unobservable.toml")
     for method in ("certified", "paper"):
         with pytest.raises(DesignFailed):

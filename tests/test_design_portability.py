@@ -17,13 +17,13 @@ import cvxpy as cp
 import numpy as np
 import pytest
 
+from monitor.checks.verify import verify_gains
 from monitor.demo.methods import METHODS
 from monitor.design import run_design
 from monitor.design.separate import observer_alone
 from monitor.design.solve import CHECK_MARGIN, PATHS, SolveFailed, solve_checked
 from monitor.errors import DesignFailed
 from monitor.model.plant import Plant, load_plant, parse_plant, plant_from_table
-from monitor.checks.verify import verify_gains
 from tests.designs import designed
 
 PRESETS = ("paper", "paper-continuous")
@@ -146,9 +146,11 @@ def test_a_check_that_cannot_be_evaluated_proves_nothing():
 
 def test_an_infeasible_observer_names_the_method_that_failed():
     """An unstable mode the output never sees: no observer exists, and the message says whose LMI it was."""
-    plant = parse_plant('form = "discrete"\nh = 1.0\ntau_min = 0.0\ntau_max = 0.4\nA = [[1.5, 0.0], [0.0, 0.5]]\n'
-                        'B0 = [[1.0], [1.0]]\nB1 = [[0.1], [0.1]]\nC = [[0.0, 1.0]]\nDf = [[1.0], [1.0]]\n'
-                        'Dd = [[1.0], [1.0]]\n')
+    plant = parse_plant(
+        'form = "discrete"\nh = 1.0\ntau_min = 0.0\ntau_max = 0.4\nA = [[1.5, 0.0], [0.0, 0.5]]\n'
+        "B0 = [[1.0], [1.0]]\nB1 = [[0.1], [0.1]]\nC = [[0.0, 1.0]]\nDf = [[1.0], [1.0]]\n"
+        "Dd = [[1.0], [1.0]]\n"
+    )
     with pytest.raises(DesignFailed, match=r"^robust-separate method, observer LMI: clarabel: "):
         observer_alone(plant, [np.zeros((2, 1))], method="robust-separate")
 

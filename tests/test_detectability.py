@@ -30,8 +30,15 @@ def _fly_linear(plant, gains, steps: int, delay: str, wind, fault: str | None = 
     from sim_vehicle.simulation import Simulation
 
     loop = ClosedLoop(Estimator(plant, gains), alarm=alarm)
-    sim = Simulation(plant=plant, sink=loop, steps=steps, delay=parse_delay_spec(delay, seed=seed), wind=wind,
-                     fault=parse_fault_spec(fault), seed=seed)
+    sim = Simulation(
+        plant=plant,
+        sink=loop,
+        steps=steps,
+        delay=parse_delay_spec(delay, seed=seed),
+        wind=wind,
+        fault=parse_fault_spec(fault),
+        seed=seed,
+    )
     return loop.fly(sim)
 
 
@@ -43,8 +50,13 @@ def test_fhat_std_correlation_and_crossings_match_a_long_simulation_of_the_loop(
 
     plant, result = _paper()
     noise, _ = fhat_noise(plant, result.gains, SIGMA, TAU_D, per_hour=1.0)
-    loop = _fly_linear(plant, result.gains, 20_000, f"const:{noise.tau}",
-                       Wind(oscillator=False, sigma=SIGMA, tau=TAU_D, h=plant.h, seed=7))
+    loop = _fly_linear(
+        plant,
+        result.gains,
+        20_000,
+        f"const:{noise.tau}",
+        Wind(oscillator=False, sigma=SIGMA, tau=TAU_D, h=plant.h, seed=7),
+    )
     f = np.array([loop.f_hat[k] for k in range(100, 20_000)])
     assert f.std() == pytest.approx(noise.std, rel=0.05), (f.std(), noise.std)
     rho = float(np.mean(f[:-1] * f[1:]) / np.mean(f * f))
@@ -83,9 +95,16 @@ def test_the_proven_threshold_holds_and_the_bias_is_surely_detected_under_random
     assert r.mode == "bounded" and r.threshold == pytest.approx(1.25 * r.noise_bound) and math.isfinite(r.bias)
     onset, window = 150, int(r.within_s / plant.h)
     for seed in range(4):
-        loop = _fly_linear(plant, result.gains, onset + window + 2, f"uniform:{plant.tau_min}:{plant.tau_max}",
-                           _Bounded(D, seed, bang=seed % 2 == 0), fault=f"bias:{r.bias!r}@{onset}",
-                           alarm=AlarmConfig(r.threshold, r.clear, r.alarm_samples), seed=seed)
+        loop = _fly_linear(
+            plant,
+            result.gains,
+            onset + window + 2,
+            f"uniform:{plant.tau_min}:{plant.tau_max}",
+            _Bounded(D, seed, bang=seed % 2 == 0),
+            fault=f"bias:{r.bias!r}@{onset}",
+            alarm=AlarmConfig(r.threshold, r.clear, r.alarm_samples),
+            seed=seed,
+        )
         before = max(abs(loop.f_hat[k]) for k in range(onset))
         assert before <= r.noise_bound, (seed, before, r.noise_bound)
         assert loop.raised(0, onset) == []
@@ -133,8 +152,12 @@ def test_the_command_reports_json_and_refuses_bad_input_in_one_line(aired_files,
     from monitor.cli import main
 
     plant, gains = aired_files
-    assert main(["detectability", "--plant", plant, "--gains", gains, "--turbulence", "moderate", "--within", "5",
-                 "--json"]) == 0
+    assert (
+        main(
+            ["detectability", "--plant", plant, "--gains", gains, "--turbulence", "moderate", "--within", "5", "--json"]
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert out["mode"] == "turbulence" and out["turbulence"] == "moderate" and out["threshold"] > 0
     assert out["bias"] > out["threshold"] and out["sigma_ratio"] == pytest.approx(1.418, abs=1e-3)
@@ -167,8 +190,9 @@ def test_run_auto_threshold_takes_the_turbulence_level(aired_files):
     plant, gains = aired_files
     model = load_model(plant, gains)
     fleet = Fleet(model)
-    args = argparse.Namespace(alarm_threshold="auto", disturbance_bound=None, turbulence="moderate",
-                              alarm_clear=None, alarm_samples=2)
+    args = argparse.Namespace(
+        alarm_threshold="auto", disturbance_bound=None, turbulence="moderate", alarm_clear=None, alarm_samples=2
+    )
     config = alarm_from_args(args, fleet)
     assert config.threshold == pytest.approx(turbulence_threshold(model.plant, model.gains.gains, "moderate"))
     with pytest.raises(UserError, match="not both"):

@@ -23,8 +23,24 @@ def test_the_predicted_noise_and_smallest_bias_are_within_a_stated_factor_of_jsb
     plant, result = designed(PLANT, "certified")
     gains = tmp_path / "gains.toml"
     write_gains(gains, result, plant)
-    code = main(["detectability", "--plant", PLANT, "--gains", str(gains), "--turbulence", "light", "--monte-carlo",
-                 "2", "--minutes", "1", "--aircraft", "c172p", "--json"])
+    code = main(
+        [
+            "detectability",
+            "--plant",
+            PLANT,
+            "--gains",
+            str(gains),
+            "--turbulence",
+            "light",
+            "--monte-carlo",
+            "2",
+            "--minutes",
+            "1",
+            "--aircraft",
+            "c172p",
+            "--json",
+        ]
+    )
     report = json.loads(capsys.readouterr().out)
     assert code == 0
     flown = report["monte_carlo"]

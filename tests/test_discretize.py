@@ -36,8 +36,12 @@ def test_F_of_tau_splits_B0_around_the_nominal_delay():
     p = load_plant("paper-continuous")
     for tau in (0.0, 0.3, 0.4612):
         dm = discretize(p.continuous, p.h, tau)
-        np.testing.assert_allclose(dm.B0, p.B0 + F_of_tau(p.continuous, p.h, tau, p.tau_bar) @ p.continuous.B_c, atol=1e-12)
-        np.testing.assert_allclose(dm.B1, p.B1 - F_of_tau(p.continuous, p.h, tau, p.tau_bar) @ p.continuous.B_c, atol=1e-12)
+        np.testing.assert_allclose(
+            dm.B0, p.B0 + F_of_tau(p.continuous, p.h, tau, p.tau_bar) @ p.continuous.B_c, atol=1e-12
+        )
+        np.testing.assert_allclose(
+            dm.B1, p.B1 - F_of_tau(p.continuous, p.h, tau, p.tau_bar) @ p.continuous.B_c, atol=1e-12
+        )
 
 
 def test_lemma1_as_printed_gives_the_papers_delta():

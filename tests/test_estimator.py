@@ -8,8 +8,9 @@ from monitor.model.closed_loop import Gains
 from monitor.model.estimator import Estimator
 from monitor.model.plant import load_plant
 
-G = Gains(L=np.array([[1.8], [1.6]]), M=np.array([[0.9]]), K1=np.array([[-0.26]]), K2=np.array([[0.1]]),
-          K3=np.array([[-1.0]]))
+G = Gains(
+    L=np.array([[1.8], [1.6]]), M=np.array([[0.9]]), K1=np.array([[-0.26]]), K2=np.array([[0.1]]), K3=np.array([[-1.0]])
+)
 
 
 def _by_hand(p, x, f, u_prev, y, u):

@@ -6,11 +6,11 @@ import math
 
 import numpy as np
 
-from monitor.model.norms import hinf_norm
 from monitor.design import default_fault_time_constant, reported_error_bound
 from monitor.model.closed_loop import closed_loop
 from monitor.model.delay_model import b0_of_tau
 from monitor.model.estimator import Estimator
+from monitor.model.norms import hinf_norm
 from monitor.model.plant import load_plant, parse_plant
 from tests.designs import designed
 
@@ -50,9 +50,11 @@ def test_the_reported_error_bound_holds_for_the_cascade_at_every_delay():
 
 def test_the_filter_is_on_by_default_only_for_a_plant_flying_in_turbulence():
     assert default_fault_time_constant(load_plant("paper-continuous")) is None
-    base = ('form = "continuous"\nh = 0.05\ntau_min = 0.0\ntau_max = 0.02\nA_c = [[-1.0]]\nB_c = [[1.0]]\n'
-            'D_cf = [[1.0]]\nD_cd = [[1.0]]\nC = [[1.0]]\n')
-    assert default_fault_time_constant(parse_plant(base + '[disturbance]\nsigma = 0.2\ntime_constant = 0.1\n')) is None
+    base = (
+        'form = "continuous"\nh = 0.05\ntau_min = 0.0\ntau_max = 0.02\nA_c = [[-1.0]]\nB_c = [[1.0]]\n'
+        "D_cf = [[1.0]]\nD_cd = [[1.0]]\nC = [[1.0]]\n"
+    )
+    assert default_fault_time_constant(parse_plant(base + "[disturbance]\nsigma = 0.2\ntime_constant = 0.1\n")) is None
     light = parse_plant(base + '[disturbance]\nsigma = 0.4\ntime_constant = 0.4\nturbulence = "light"\n')
     assert default_fault_time_constant(light) == 1.0
     assert default_fault_time_constant(light, "none") is None  # design --turbulence none: calm air after all

@@ -13,8 +13,8 @@ from monitor.link.dialect import layout_by_name
 from monitor.link.frames import FrameCounters, FrameEncoder, FrameParser
 from monitor.link.signing import Signer
 from monitor.service.alarm import AlarmConfig
-from monitor.service.pipeline import Pipeline
 from monitor.service.fleet_file import Fleet, load_model
+from monitor.service.pipeline import Pipeline
 from monitor.service.vehicles import VehicleTable
 from monitor.wire.mavlink import mavlink, new_codec
 from tests.gains_files import hand_made_gains_file
@@ -134,11 +134,13 @@ def _captured() -> list[bytes]:
 
             bump_signing_clock(codec)
         for k in range(4):
-            for msg in (mavlink.MAVLink_attitude_message(k * 20, 0, 0, 0, 0, 0.1, 0),
-                        mavlink.MAVLink_aoa_ssa_message(k * 20_000, 1.0 + k, 0.0),
-                        mavlink.MAVLink_actuator_output_status_message(k * 20_000, 1, [0.5] + [0.0] * 31),
-                        mavlink.MAVLink_heartbeat_message(1, 3, 0, 0, 4, 3),
-                        mavlink.MAVLink_statustext_message(4, b"hello", 0, 0)):
+            for msg in (
+                mavlink.MAVLink_attitude_message(k * 20, 0, 0, 0, 0, 0.1, 0),
+                mavlink.MAVLink_aoa_ssa_message(k * 20_000, 1.0 + k, 0.0),
+                mavlink.MAVLink_actuator_output_status_message(k * 20_000, 1, [0.5] + [0.0] * 31),
+                mavlink.MAVLink_heartbeat_message(1, 3, 0, 0, 4, 3),
+                mavlink.MAVLink_statustext_message(4, b"hello", 0, 0),
+            ):
                 codec.send(msg)
                 out.append(codec.file.take())
     return out
@@ -151,9 +153,9 @@ def _mutate(rng: random.Random, data: bytes) -> bytes:
         if kind < 0.5 and b:
             b[rng.randrange(len(b))] ^= 1 << rng.randrange(8)
         elif kind < 0.7 and b:
-            del b[rng.randrange(len(b)):]
+            del b[rng.randrange(len(b)) :]
         elif kind < 0.85:
-            b[rng.randrange(len(b) + 1):0] = bytes(rng.randrange(256) for _ in range(rng.randint(1, 8)))
+            b[rng.randrange(len(b) + 1) : 0] = bytes(rng.randrange(256) for _ in range(rng.randint(1, 8)))
         elif b:
             i = rng.randrange(len(b))
             b[i : i + 1] = b"\xfd"
@@ -184,8 +186,9 @@ def test_mutation_fuzz_of_captured_frames(model, signed: bool) -> None:
         for msgid, sysid, _comp, payload in ours:
             assert (msgid, sysid, bytes(payload)) in originals
         stream.feed(data)
-        pipeline.on_frames((link, ("127.0.0.1", i)), FrameParser(pipeline.frames, signer).feed(data), 0,
-                           now=i * 0.01, wall=i * 0.01)
+        pipeline.on_frames(
+            (link, ("127.0.0.1", i)), FrameParser(pipeline.frames, signer).feed(data), 0, now=i * 0.01, wall=i * 0.01
+        )
     for vehicle in pipeline.table.vehicles.values():
         assert all(math.isfinite(v) for v in vehicle.state.z)
     assert pipeline.frames.garbage > 0

@@ -51,7 +51,9 @@ def _subcommand_lines():
             yield from ((top.prog, a.dest, a.help) for a in action._choices_actions)
 
 
-@pytest.mark.parametrize("prog, name, line", list(_subcommand_lines()), ids=lambda v: v if isinstance(v, str) and " " not in v else "")
+@pytest.mark.parametrize(
+    "prog, name, line", list(_subcommand_lines()), ids=lambda v: v if isinstance(v, str) and " " not in v else ""
+)
 def test_every_subcommand_says_in_one_line_what_it_is_for(prog, name, line):
     assert line and len(line.split()) >= 6 and len(line) <= 110, f"{prog} {name}: {line!r}"
 

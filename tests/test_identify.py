@@ -27,7 +27,7 @@ import pytest
 
 from monitor.model.identification import FlightData, identify, modes_of, nrmse_fit
 from monitor.model.plant import load_plant, parse_plant
-from tests.c172p_flights import H, Flight, fly, quiet, trimmed_c172p, write_tlog
+from tests.c172p_flights import Flight, H, fly, quiet, trimmed_c172p, write_tlog
 
 FT_TO_M = 0.3048
 R2D = 180.0 / math.pi
@@ -56,8 +56,13 @@ def linearisation(airspeed_kt: float = 100.0, altitude_ft: float = 3000.0) -> di
         deg.append(fdm["fcs/elevator-pos-deg"])
     deg_per_command = (deg[1] - deg[0]) / 0.02
     B4 = S @ B[order, inputs.index("DeCmd")][:, None] / deg_per_command
-    return {"A": A4, "B": B4, "deg_per_command": deg_per_command, "modes": modes_of(A4),
-            "short_period": modes_of(A4[:2, :2])[0]}
+    return {
+        "A": A4,
+        "B": B4,
+        "deg_per_command": deg_per_command,
+        "modes": modes_of(A4),
+        "short_period": modes_of(A4[:2, :2])[0],
+    }
 
 
 @pytest.fixture(scope="session")
@@ -99,16 +104,22 @@ def test_c172p_identified_from_its_log_fits_held_out_data_and_matches_jsbsim_lin
     assert report["samples"]["validation"] == 360  # the last 30 % of the 60 s manoeuvre
     assert report["excitation"]["lead_in_s"] == pytest.approx(5.0)
     inventory = report["log"]["inventory"]  # what the log holds: 5 messages a sample + a HEARTBEAT a second
-    assert inventory["frames_v2"] == 1300 * 4 + 65 and inventory["frames_v1"] == 0 and inventory["sysids"] == {"1": 5265}
+    assert (
+        inventory["frames_v2"] == 1300 * 4 + 65 and inventory["frames_v1"] == 0 and inventory["sysids"] == {"1": 5265}
+    )
     assert {m["name"]: m["hz"] for m in inventory["messages"]}["AOA_SSA"] == pytest.approx(20.0, rel=0.01)
 
     lin = c172p_flight["lin"]
     sp_lin, ph_lin = lin["modes"]
     sp, ph = (next(m for m in report["modes"] if m["name"] == name) for name in ("short period", "phugoid"))
-    print(f"short period: identified wn {sp['wn_rad_s']:.3f} zeta {sp['zeta']:.3f}; "
-          f"FGLinearization wn {sp_lin.wn:.3f} zeta {sp_lin.zeta:.3f}")
-    print(f"phugoid: identified wn {ph['wn_rad_s']:.4f} zeta {ph['zeta']:.3f} period {ph['period_s']:.1f} s; "
-          f"FGLinearization wn {ph_lin.wn:.4f} zeta {ph_lin.zeta:.3f} period {ph_lin.period_s:.1f} s")
+    print(
+        f"short period: identified wn {sp['wn_rad_s']:.3f} zeta {sp['zeta']:.3f}; "
+        f"FGLinearization wn {sp_lin.wn:.3f} zeta {sp_lin.zeta:.3f}"
+    )
+    print(
+        f"phugoid: identified wn {ph['wn_rad_s']:.4f} zeta {ph['zeta']:.3f} period {ph['period_s']:.1f} s; "
+        f"FGLinearization wn {ph_lin.wn:.4f} zeta {ph_lin.zeta:.3f} period {ph_lin.period_s:.1f} s"
+    )
     assert sp["wn_rad_s"] == pytest.approx(sp_lin.wn, rel=0.10)
     assert sp["zeta"] == pytest.approx(sp_lin.zeta, rel=0.10)
     assert ph["period_s"] == pytest.approx(ph_lin.period_s, rel=0.15)  # measured 5 % apart
@@ -136,8 +147,12 @@ def test_c172p_identified_from_its_log_fits_held_out_data_and_matches_jsbsim_lin
     assert sig["outputs"] == ["alpha", "q", "theta", "airspeed"] and sig["actuator"] == ["elevator"]
     assert set(sig["operating_point"]) == {"alpha", "q", "theta", "airspeed", "elevator"}
     assert sig["measured"]["airspeed"] == {"field": "VFR_HUD.airspeed", "unit": "m/s"}
-    assert sig["command"] == {"message": "SET_ACTUATOR_CONTROL_TARGET", "channels": [1], "full_scale": [30.0],
-                              "group": 0}
+    assert sig["command"] == {
+        "message": "SET_ACTUATOR_CONTROL_TARGET",
+        "channels": [1],
+        "full_scale": [30.0],
+        "group": 0,
+    }
     ident = raw["identification"]
     assert ident["fit_percent"]["q"] == pytest.approx(fit["q"], abs=0.01)
     assert [m["name"] for m in ident["modes"]] == ["short period", "phugoid"]
@@ -168,8 +183,10 @@ def test_validation_is_a_free_run_not_a_one_step_prediction(c172p_flight) -> Non
     run = result.validation_run
     assert np.allclose(nrmse_fit(run["y"], run["y_hat"]), list(result.fit_validation.values()))
     # one step from every measured state is far better than the free run: the score is the free run's
-    one_step = (result.A_d @ run["y"][:-1].T + result.B_d @ (flight.elevator[-len(run["y"]):-1][None, :]
-                                                              - result.operating_point["elevator"])).T
+    one_step = (
+        result.A_d @ run["y"][:-1].T
+        + result.B_d @ (flight.elevator[-len(run["y"]) : -1][None, :] - result.operating_point["elevator"])
+    ).T
     assert np.all(nrmse_fit(run["y"][1:], one_step) > np.array(list(result.fit_validation.values())))
 
 
@@ -180,8 +197,9 @@ def test_sensor_noise_does_not_bias_the_modes(c172p_flight) -> None:
     flight = c172p_flight["flight"]
     X = np.column_stack([flight.alpha, flight.q * R2D, flight.theta * R2D, flight.airspeed])
     X = X + np.random.default_rng(1).normal(size=X.shape) * [0.05, 0.2, 0.05, 0.1]
-    result = identify(FlightData(H, np.arange(len(X)), X, flight.elevator[:, None],
-                                 ("alpha", "q", "theta", "airspeed")))
+    result = identify(
+        FlightData(H, np.arange(len(X)), X, flight.elevator[:, None], ("alpha", "q", "theta", "airspeed"))
+    )
     assert result.method["refined"] and result.method["cost"] < result.method["cost_least_squares"]
     sp, ph = result.modes
     sp_lin, ph_lin = c172p_flight["lin"]["modes"]
@@ -195,8 +213,9 @@ def test_a_flight_that_starts_with_the_manoeuvre_takes_the_models_equilibrium_as
     """sim-vehicle --excite starts the PRBS at once and returns to trim after it: no lead-in to measure."""
     flight = fly(seconds=40.0, lead_in=0.0, tail=10.0, seed=3)
     X = np.column_stack([flight.alpha, flight.q * R2D, flight.theta * R2D, flight.airspeed])
-    result = identify(FlightData(H, np.arange(len(X)), X, flight.elevator[:, None],
-                                 ("alpha", "q", "theta", "airspeed")))
+    result = identify(
+        FlightData(H, np.arange(len(X)), X, flight.elevator[:, None], ("alpha", "q", "theta", "airspeed"))
+    )
     op = result.operating_point
     assert "equilibrium" in result.operating_point_source
     assert op["elevator"] == pytest.approx(flight.trim_elevator, abs=1e-6)
@@ -230,8 +249,10 @@ def test_a_log_without_vfr_hud_names_the_missing_signal(c172p_flight, tmp_path: 
 
 def test_a_too_short_log_is_refused(c172p_flight, tmp_path: Path) -> None:
     full = c172p_flight["flight"]
-    short = Flight(*(getattr(full, f)[: 100 + 80] for f in ("alpha", "q", "theta", "airspeed", "elevator")),
-                   trim_elevator=full.trim_elevator)  # 5 s of trim + 4 s of manoeuvre
+    short = Flight(
+        *(getattr(full, f)[: 100 + 80] for f in ("alpha", "q", "theta", "airspeed", "elevator")),
+        trim_elevator=full.trim_elevator,
+    )  # 5 s of trim + 4 s of manoeuvre
     log = tmp_path / "short.tlog"
     write_tlog(log, short)
     code, _out, stderr = _identify(str(log), "--out", str(tmp_path / "p.toml"))
@@ -245,16 +266,31 @@ def test_a_too_short_log_is_refused(c172p_flight, tmp_path: Path) -> None:
 
 def test_sysid_h_and_tau_max_options(c172p_flight, tmp_path: Path) -> None:
     out = tmp_path / "p.toml"
-    code, stdout, stderr = _identify(str(c172p_flight["log"]), "--out", str(out), "--h", "0.1", "--tau-max", "0.04",
-                                     "--sysid", "1", "--json", "--model", "short-period")
+    code, stdout, stderr = _identify(
+        str(c172p_flight["log"]),
+        "--out",
+        str(out),
+        "--h",
+        "0.1",
+        "--tau-max",
+        "0.04",
+        "--sysid",
+        "1",
+        "--json",
+        "--model",
+        "short-period",
+    )
     assert code == 0, stderr
     report = json.loads(stdout)
     plant = load_plant(out)
     assert plant.h == pytest.approx(0.1) and plant.tau_max == pytest.approx(0.04)
     assert report["samples"]["log"] == 650 and report["fit_percent"]["alpha"] > 90
-    for argv, words in ((("--h", "0.07"), "whole multiple"), (("--tau-min", "0.2", "--tau-max", "0.1"), "tau_min <= tau_max"),
-                        (("--tau-max", "0.5"), "at most 3"),
-                        (("--sysid", "2"), "missing signals")):
+    for argv, words in (
+        (("--h", "0.07"), "whole multiple"),
+        (("--tau-min", "0.2", "--tau-max", "0.1"), "tau_min <= tau_max"),
+        (("--tau-max", "0.5"), "at most 3"),
+        (("--sysid", "2"), "missing signals"),
+    ):
         code, _o, stderr = _identify(str(c172p_flight["log"]), "--out", str(out), *argv)
         assert code == 2 and words in stderr and len(stderr.strip().splitlines()) == 1, stderr
 
@@ -281,8 +317,7 @@ def test_lost_records_several_vehicles_and_a_signal_map_file(c172p_flight, tmp_p
     assert code == 2 and "vehicles 1, 2: choose one with --sysid" in stderr
     reference = tmp_path / "reference.toml"  # made here: under xdist the test that writes work/c172p.toml may
     assert _identify(str(c172p_flight["log"]), "--out", str(reference))[0] == 0  # run on the other worker
-    code, stdout, stderr = _identify(str(log), "--out", str(out), "--sysid", "2", "--json",
-                                     "--signals", str(reference))
+    code, stdout, stderr = _identify(str(log), "--out", str(out), "--sysid", "2", "--json", "--signals", str(reference))
     assert code == 0, stderr
     assert json.loads(stdout)["samples"]["log"] == 1300 and json.loads(stdout)["sysid"] == 2
 
@@ -291,8 +326,9 @@ def test_plant_file_identification_table_is_information_only() -> None:
     base = load_plant("paper-continuous").raw
     text = "\n".join(f"{k} = {json.dumps(v)}" for k, v in base.items() if not isinstance(v, dict))
     plain = parse_plant(text + "\n[actuator]\nlimit = 30.0\n")
-    info = parse_plant(text + "\n[actuator]\nlimit = 30.0\n[identification]\nsource_log = \"x.tlog\"\n"
-                       "fit_percent = { alpha = 97.0 }\n")
+    info = parse_plant(
+        text + '\n[actuator]\nlimit = 30.0\n[identification]\nsource_log = "x.tlog"\nfit_percent = { alpha = 97.0 }\n'
+    )
     assert info.digest == plain.digest  # not part of the dynamics: gains stay valid
     assert np.array_equal(info.A, plain.A)
     with pytest.raises(Exception, match="'identification' must be a table"):
@@ -331,14 +367,16 @@ def test_air_only_keeps_the_model_and_measures_the_gust_of_another_log(c172p_fli
     plant_path, kept_path = tmp_path / "p.toml", tmp_path / "kept.toml"
     code, _out, stderr = _identify(str(c172p_flight["log"]), "--out", str(plant_path))
     assert code == 0, stderr
-    code, out, stderr = _identify(str(c172p_flight["log"]), "--air-only", str(plant_path), "--turbulence", "light",
-                                  "--out", str(kept_path))
+    code, out, stderr = _identify(
+        str(c172p_flight["log"]), "--air-only", str(plant_path), "--turbulence", "light", "--out", str(kept_path)
+    )
     assert code == 0 and "measured the air" in out, stderr
     plant, kept = load_plant(plant_path), load_plant(kept_path)
     assert np.array_equal(plant.A, kept.A) and plant.signals == kept.signals and plant.digest != kept.digest
     assert kept.disturbance.turbulence == "light"
     assert kept.disturbance.sigma == pytest.approx(plant.disturbance.sigma, rel=1e-3)
     assert kept.disturbance.time_constant == pytest.approx(plant.disturbance.time_constant, rel=1e-3)
-    code, _o, stderr = _identify(str(c172p_flight["log"]), "--air-only", str(tmp_path / "none.toml"), "--out",
-                                 str(tmp_path / "x.toml"))
+    code, _o, stderr = _identify(
+        str(c172p_flight["log"]), "--air-only", str(tmp_path / "none.toml"), "--out", str(tmp_path / "x.toml")
+    )
     assert code == 2 and len(stderr.strip().splitlines()) == 1, stderr

@@ -33,17 +33,52 @@ MAY_IMPORT: dict[str, set[str]] = {
     "monitor.pipelines": {"monitor.wire", "monitor.link", "monitor.model"},
     "monitor.service": {"monitor.wire", "monitor.link", "monitor.model", "monitor.gains"},
     "monitor.scoring": {"monitor.wire", "monitor.model", "monitor.checks", "monitor.service"},
-    "monitor.jsbsim_flights": {"monitor.wire", "monitor.link", "monitor.model", "monitor.checks", "monitor.service",
-                               "sim_vehicle"},
-    "monitor.demo": {"monitor.wire", "monitor.link", "monitor.model", "monitor.design", "monitor.gains",
-                     "monitor.checks", "monitor.pipelines", "monitor.service", "monitor.scoring",
-                     "monitor.jsbsim_flights"},
-    "monitor.api": {"monitor.wire", "monitor.link", "monitor.model", "monitor.design", "monitor.gains",
-                    "monitor.checks", "monitor.pipelines", "monitor.service", "monitor.scoring", "monitor.demo",
-                    "monitor.jsbsim_flights"},
-    "monitor.commands": {"monitor.wire", "monitor.link", "monitor.model", "monitor.design", "monitor.gains",
-                         "monitor.checks", "monitor.pipelines", "monitor.service", "monitor.scoring", "monitor.demo",
-                         "monitor.jsbsim_flights"},
+    "monitor.jsbsim_flights": {
+        "monitor.wire",
+        "monitor.link",
+        "monitor.model",
+        "monitor.checks",
+        "monitor.service",
+        "sim_vehicle",
+    },
+    "monitor.demo": {
+        "monitor.wire",
+        "monitor.link",
+        "monitor.model",
+        "monitor.design",
+        "monitor.gains",
+        "monitor.checks",
+        "monitor.pipelines",
+        "monitor.service",
+        "monitor.scoring",
+        "monitor.jsbsim_flights",
+    },
+    "monitor.api": {
+        "monitor.wire",
+        "monitor.link",
+        "monitor.model",
+        "monitor.design",
+        "monitor.gains",
+        "monitor.checks",
+        "monitor.pipelines",
+        "monitor.service",
+        "monitor.scoring",
+        "monitor.demo",
+        "monitor.jsbsim_flights",
+    },
+    "monitor.commands": {
+        "monitor.wire",
+        "monitor.link",
+        "monitor.model",
+        "monitor.design",
+        "monitor.gains",
+        "monitor.checks",
+        "monitor.pipelines",
+        "monitor.service",
+        "monitor.scoring",
+        "monitor.demo",
+        "monitor.jsbsim_flights",
+    },
     "monitor.cli": {"monitor.commands"},
     "monitor.__main__": {"monitor.cli"},
     # the vehicle knows the wire and the plant's description, never the estimator or the designs
@@ -108,8 +143,9 @@ def _allowed(src: str, name: str) -> bool:
 
 
 def test_every_import_points_down_the_layers() -> None:
-    wrong = sorted(f"{src} -> {name} ({where[0]})" for (src, name), where in imports().items()
-                   if not _allowed(src, name))
+    wrong = sorted(
+        f"{src} -> {name} ({where[0]})" for (src, name), where in imports().items() if not _allowed(src, name)
+    )
     assert not wrong, "imports against docs/layout.md:\n" + "\n".join(wrong)
 
 
@@ -120,8 +156,12 @@ def test_no_two_packages_import_each_other() -> None:
 
 
 def test_the_monitor_flies_sim_vehicle_from_one_module_only() -> None:
-    where = {w.split(":")[0] for (src, name), ws in imports().items() if src.startswith("monitor.")
-             and unit(name) == "sim_vehicle" for w in ws}
+    where = {
+        w.split(":")[0]
+        for (src, name), ws in imports().items()
+        if src.startswith("monitor.") and unit(name) == "sim_vehicle"
+        for w in ws
+    }
     assert where <= {"monitor/jsbsim_flights.py"}, where
 
 
@@ -131,9 +171,14 @@ def test_every_layer_is_in_the_docs() -> None:
     assert not missing, missing
 
 
-@pytest.mark.parametrize("src, name", [("monitor.design", "monitor.checks.verify"),
-                                       ("monitor.model", "monitor.service.vehicles"),
-                                       ("sim_vehicle", "monitor.model.estimator"),
-                                       ("monitor.demo", "monitor.commands.identify")])
+@pytest.mark.parametrize(
+    "src, name",
+    [
+        ("monitor.design", "monitor.checks.verify"),
+        ("monitor.model", "monitor.service.vehicles"),
+        ("sim_vehicle", "monitor.model.estimator"),
+        ("monitor.demo", "monitor.commands.identify"),
+    ],
+)
 def test_the_rules_refuse_an_upward_import(src: str, name: str) -> None:
     assert not _allowed(src, name)

@@ -18,8 +18,8 @@ from monitor.link.signals import parse_signals
 from monitor.link.tlog import TlogWriter
 from monitor.model.estimator import Estimator
 from monitor.service.alarm import AlarmConfig
-from monitor.service.offline import analyse_log
 from monitor.service.fleet_file import Fleet, load_model
+from monitor.service.offline import analyse_log
 from monitor.service.vehicles import VehicleTable
 from monitor.wire.mavlink import mavlink, new_codec
 from tests.aircraft_files import AIRCRAFT_PLANT, GAINS, LIMIT, OP, SIGNALS, U0, Y0, aircraft_files
@@ -41,7 +41,9 @@ ATT, AOA, ACT, HUD = (layout_by_name(n) for n in ("ATTITUDE", "AOA_SSA", "ACTUAT
 
 
 def att(k: int, q_deg_s: float = 0.0, theta: float = 2.31) -> tuple:
-    return ATT.decode(ATT.unpacker.pack((k * H_US // 1000) & 0xFFFFFFFF, 0.0, theta / DEG, 0.0, 0.0, q_deg_s / DEG, 0.0))
+    return ATT.decode(
+        ATT.unpacker.pack((k * H_US // 1000) & 0xFFFFFFFF, 0.0, theta / DEG, 0.0, 0.0, q_deg_s / DEG, 0.0)
+    )
 
 
 def aoa(k: int, alpha: float = 2.31) -> tuple:
@@ -62,6 +64,7 @@ def speeds(samples) -> list[float]:
 
 # --- the signal map ---------------------------------------------------------------------------------
 
+
 def test_the_contract_map_parses_with_its_operating_point_and_vfr_hud() -> None:
     sig = _map()
     assert sig.operating_point == OP
@@ -70,8 +73,9 @@ def test_the_contract_map_parses_with_its_operating_point_and_vfr_hud() -> None:
     assert sig.messages(observe=True) == ("AOA_SSA", "ATTITUDE", "VFR_HUD", "ACTUATOR_OUTPUT_STATUS")
     assert not sig.measured["airspeed"].timed and sig.measured["airspeed"].hold == 1.0
     assert sig.measured["alpha"].timed and "VFR_HUD" not in sig.time_fields
-    assert sig.describe_operating_point() == ("operating point alpha 2.31 deg, q 0 deg/s, theta 2.31 deg, "
-                                              "airspeed 51.4 m/s, elevator -4.3 deg")
+    assert sig.describe_operating_point() == (
+        "operating point alpha 2.31 deg, q 0 deg/s, theta 2.31 deg, airspeed 51.4 m/s, elevator -4.3 deg"
+    )
     assert "y3=VFR_HUD.airspeed (latest value)" in sig.describe()
     # deviation in: y - y0 and u - u0; absolute out: u0 + u
     y, u = sig.deviations({"alpha": 3.31, "q": -1.0, "theta": 2.0, "airspeed": 50.4, "elevator": -6.3})
@@ -91,24 +95,39 @@ def test_without_an_operating_point_the_values_are_the_deviations() -> None:
     assert sig.absolute([1.5]) == [1.5]
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda r: r["operating_point"].pop("theta"), "operating_point: missing 'theta'"),
-    (lambda r: [r["operating_point"].pop(n) for n in ("q", "elevator")], "missing 'q', 'elevator'"),
-    (lambda r: r["operating_point"].update(beta=1.0), "operating_point: names 'beta', which is not in [signals.measured]"),
-    (lambda r: (r["measured"].update(rpm={"field": "VFR_HUD.throttle"}), r["operating_point"].update(rpm=2400.0)),
-     "names 'rpm', which is not an output or actuator signal"),
-    (lambda r: r["operating_point"].update(alpha="2.31"), "'alpha' must be a finite number"),
-    (lambda r: r["operating_point"].update(alpha=math.nan), "'alpha' must be a finite number"),
-    (lambda r: r["operating_point"].update(alpha=True), "'alpha' must be a finite number"),
-    (lambda r: r.update(operating_point=[2.31, 0.0]), "operating_point: must be a table"),
-    (lambda r: r["measured"]["alpha"].update(range=[-20.0, 20.0]) or r["operating_point"].update(alpha=25.0),
-     "'alpha' = 25 is outside its range [-20, 20]"),
-    (lambda r: r["measured"].update(elevator={"field": "VFR_HUD.throttle"}),
-     "actuator 'elevator': VFR_HUD has no time_usec or time_boot_ms"),
-    (lambda r: r["measured"]["alpha"].update(hold=0.5), "'hold' is for a message without a time field"),
-    (lambda r: r["measured"]["airspeed"].update(hold=0), "'hold' must be a positive number of seconds"),
-    (lambda r: r.update(instant="VFR_HUD"), "needs a time_usec field"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda r: r["operating_point"].pop("theta"), "operating_point: missing 'theta'"),
+        (lambda r: [r["operating_point"].pop(n) for n in ("q", "elevator")], "missing 'q', 'elevator'"),
+        (
+            lambda r: r["operating_point"].update(beta=1.0),
+            "operating_point: names 'beta', which is not in [signals.measured]",
+        ),
+        (
+            lambda r: (
+                r["measured"].update(rpm={"field": "VFR_HUD.throttle"}),
+                r["operating_point"].update(rpm=2400.0),
+            ),
+            "names 'rpm', which is not an output or actuator signal",
+        ),
+        (lambda r: r["operating_point"].update(alpha="2.31"), "'alpha' must be a finite number"),
+        (lambda r: r["operating_point"].update(alpha=math.nan), "'alpha' must be a finite number"),
+        (lambda r: r["operating_point"].update(alpha=True), "'alpha' must be a finite number"),
+        (lambda r: r.update(operating_point=[2.31, 0.0]), "operating_point: must be a table"),
+        (
+            lambda r: r["measured"]["alpha"].update(range=[-20.0, 20.0]) or r["operating_point"].update(alpha=25.0),
+            "'alpha' = 25 is outside its range [-20, 20]",
+        ),
+        (
+            lambda r: r["measured"].update(elevator={"field": "VFR_HUD.throttle"}),
+            "actuator 'elevator': VFR_HUD has no time_usec or time_boot_ms",
+        ),
+        (lambda r: r["measured"]["alpha"].update(hold=0.5), "'hold' is for a message without a time field"),
+        (lambda r: r["measured"]["airspeed"].update(hold=0), "'hold' must be a positive number of seconds"),
+        (lambda r: r.update(instant="VFR_HUD"), "needs a time_usec field"),
+    ],
+)
 def test_bad_operating_points_and_timeless_uses_are_one_line_errors(edit, message: str) -> None:
     raw = _raw()
     edit(raw)
@@ -125,11 +144,14 @@ def test_an_operating_deflection_beyond_the_actuator_limit_is_refused(tmp_path: 
 
 # --- assembly: VFR_HUD as a latest value --------------------------------------------------------------
 
+
 def test_vfr_hud_in_the_sample_s_datagram_joins_its_sample_in_any_position() -> None:
     """sim-vehicle's order (ATTITUDE, AOA_SSA, VFR_HUD, ACTUATOR_OUTPUT_STATUS) and VFR_HUD first."""
-    for order in (["ATTITUDE", "AOA_SSA", "VFR_HUD", "ACTUATOR_OUTPUT_STATUS"],
-                  ["VFR_HUD", "AOA_SSA", "ATTITUDE", "ACTUATOR_OUTPUT_STATUS"],
-                  ["AOA_SSA", "VFR_HUD", "ACTUATOR_OUTPUT_STATUS", "ATTITUDE"]):
+    for order in (
+        ["ATTITUDE", "AOA_SSA", "VFR_HUD", "ACTUATOR_OUTPUT_STATUS"],
+        ["VFR_HUD", "AOA_SSA", "ATTITUDE", "ACTUATOR_OUTPUT_STATUS"],
+        ["AOA_SSA", "VFR_HUD", "ACTUATOR_OUTPUT_STATUS", "ATTITUDE"],
+    ):
         asm = SampleAssembler(_map(), H)
         got = []
         for k in range(5):
@@ -162,8 +184,12 @@ def test_vfr_hud_after_its_sample_was_processed_serves_the_next_one_and_the_firs
 
 def test_vfr_hud_that_arrives_during_the_wait_for_the_actuator_report_is_used() -> None:
     asm = SampleAssembler(_map(), H, wait_s=0.02)
-    for name, values in (("ACTUATOR_OUTPUT_STATUS", act(0)), ("VFR_HUD", hud(50.0)), ("AOA_SSA", aoa(0)),
-                         ("ATTITUDE", att(0))):
+    for name, values in (
+        ("ACTUATOR_OUTPUT_STATUS", act(0)),
+        ("VFR_HUD", hud(50.0)),
+        ("AOA_SSA", aoa(0)),
+        ("ATTITUDE", att(0)),
+    ):
         got = asm.add(name, values, "r", 0.0)
     assert [s.k for s in got] == [0]
     assert asm.add("AOA_SSA", aoa(1), "r", 1.0) == [] and asm.add("ATTITUDE", att(1), "r", 1.0) == []
@@ -196,13 +222,18 @@ def test_observe_only_log_reordered_by_a_few_ms() -> None:
     asm = SampleAssembler(_map(), H, observe=True)
     got = asm.add("VFR_HUD", hud(49.0), "r", 0.0)
     for k in range(4):
-        for name, values in (("AOA_SSA", aoa(k)), ("ATTITUDE", att(k)), ("ACTUATOR_OUTPUT_STATUS", act(k)),
-                             ("VFR_HUD", hud(50.0 + k))):
+        for name, values in (
+            ("AOA_SSA", aoa(k)),
+            ("ATTITUDE", att(k)),
+            ("ACTUATOR_OUTPUT_STATUS", act(k)),
+            ("VFR_HUD", hud(50.0 + k)),
+        ):
             got += asm.add(name, values, "r", k * H + 0.001)
     assert [s.k for s in got] == [0, 1, 2, 3] and speeds(got) == [49.0, 50.0, 51.0, 52.0]
 
 
 # --- the vehicle table: deviations in, absolute deflections out ---------------------------------------
+
 
 def _table(tmp_path: Path, observe: bool = False) -> tuple[VehicleTable, object]:
     plant, gains = aircraft_files(tmp_path)
@@ -270,6 +301,7 @@ def test_observe_only_reports_the_absolute_deflection_and_steps_with_its_deviati
 
 # --- offline: a telemetry log, the same rule by the log's record order ------------------------------------
 
+
 def test_analyse_applies_the_same_rule_to_a_log(tmp_path: Path) -> None:
     """Observe-only log, one message per record, VFR_HUD of k written a few ms after the sample's other
     messages on even k and before them on odd k: each sample takes the VFR_HUD logged before its last part."""
@@ -282,9 +314,11 @@ def test_analyse_applies_the_same_rule_to_a_log(tmp_path: Path) -> None:
     with TlogWriter(log) as w:
         for k in range(20):
             t_us, v = k * H_US, 50.0 + 0.25 * k
-            timed = [mavlink.MAVLink_attitude_message(t_us // 1000, 0, 2.31 / DEG, 0, 0, 0.0, 0),
-                     mavlink.MAVLink_aoa_ssa_message(t_us, 2.31, 0.0),
-                     mavlink.MAVLink_actuator_output_status_message(t_us, 1, [-4.3] + [0.0] * 31)]
+            timed = [
+                mavlink.MAVLink_attitude_message(t_us // 1000, 0, 2.31 / DEG, 0, 0, 0.0, 0),
+                mavlink.MAVLink_aoa_ssa_message(t_us, 2.31, 0.0),
+                mavlink.MAVLink_actuator_output_status_message(t_us, 1, [-4.3] + [0.0] * 31),
+            ]
             vfr = mavlink.MAVLink_vfr_hud_message(v, v, 90, 60, 100.0, 0.0)
             msgs = timed + [vfr] if k % 2 == 0 else [vfr] + timed
             if k % 2 == 1 or held is None:
@@ -310,8 +344,10 @@ def test_a_missing_or_stopped_vfr_hud_is_named_in_a_warning(tmp_path: Path, capl
         assert table.message(8, "ATTITUDE", att(k), "r", 0.0) == []
     with caplog.at_level("WARNING", logger="monitor.service.vehicles"):
         assert table.warn_missing(10.0) == [8]
-    assert "vehicle sysid 8: telemetry arrives (AOA_SSA, ATTITUDE) but never becomes a sample: missing VFR_HUD" \
+    assert (
+        "vehicle sysid 8: telemetry arrives (AOA_SSA, ATTITUDE) but never becomes a sample: missing VFR_HUD"
         in caplog.text
+    )
     caplog.clear()
     for k in range(3, 60):  # VFR_HUD for a while, then it stops: after 1 s of the vehicle's clock, samples drop
         now = 11.0 + k * H

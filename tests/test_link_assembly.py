@@ -82,8 +82,9 @@ def test_time_boot_ms_is_matched_across_its_32_bit_wrap() -> None:
         assert len(got) == 1 and abs(got[0].values["q"] - 0.1 * k * 57.29577951308232) < 1e-5
 
 
-def _jittered_flight(h: float, n: int, seed: int, phase_us: int, jitter_us: int = 8_000,
-                     drift: float = 0.0) -> list[tuple[int, str, tuple]]:
+def _jittered_flight(
+    h: float, n: int, seed: int, phase_us: int, jitter_us: int = 8_000, drift: float = 0.0
+) -> list[tuple[int, str, tuple]]:
     """A real autopilot's messages of n samples: each part stamped at its sample's instant plus its own random
     0..jitter (the instant message too), the grid at an arbitrary phase of the vehicle's clock (boot time), the
     vehicle's period ``h * (1 + drift)``; in stamp order, as a ground station logs them. alpha = k tells the
@@ -95,11 +96,19 @@ def _jittered_flight(h: float, n: int, seed: int, phase_us: int, jitter_us: int 
     for k in range(n):
         base = phase_us + round(k * h * (1 + drift) * 1e6)
         t = {name: base + rng.randint(0, jitter_us) for name in ("AOA_SSA", "ATTITUDE", "ACTUATOR_OUTPUT_STATUS")}
-        out += [(t["AOA_SSA"], "AOA_SSA", AOA.decode(AOA.unpacker.pack(t["AOA_SSA"], float(k), 0.0))),
-                (t["ATTITUDE"], "ATTITUDE", ATT.decode(ATT.unpacker.pack((t["ATTITUDE"] // 1000) & 0xFFFFFFFF, 0, 0, 0,
-                                                                         0, 0.001 * k, 0))),
-                (t["ACTUATOR_OUTPUT_STATUS"], "ACTUATOR_OUTPUT_STATUS",
-                 ACT.decode(ACT.unpacker.pack(t["ACTUATOR_OUTPUT_STATUS"], 1, -float(k), *[0.0] * 31)))]
+        out += [
+            (t["AOA_SSA"], "AOA_SSA", AOA.decode(AOA.unpacker.pack(t["AOA_SSA"], float(k), 0.0))),
+            (
+                t["ATTITUDE"],
+                "ATTITUDE",
+                ATT.decode(ATT.unpacker.pack((t["ATTITUDE"] // 1000) & 0xFFFFFFFF, 0, 0, 0, 0, 0.001 * k, 0)),
+            ),
+            (
+                t["ACTUATOR_OUTPUT_STATUS"],
+                "ACTUATOR_OUTPUT_STATUS",
+                ACT.decode(ACT.unpacker.pack(t["ACTUATOR_OUTPUT_STATUS"], 1, -float(k), *[0.0] * 31)),
+            ),
+        ]
     return sorted(out, key=lambda m: m[0])
 
 
@@ -183,7 +192,8 @@ def test_a_32_bit_time_usec_instant_is_unwrapped() -> None:
     got = []
     for k in range(6):
         t = (t0 + k * 20_000) & 0xFFFFFFFF
-        got += asm.add("SERVO_OUTPUT_RAW", servo.decode(servo.unpacker.pack(t, 1500, 1500 + k, *[0] * 15)), None,
-                       float(k))
+        got += asm.add(
+            "SERVO_OUTPUT_RAW", servo.decode(servo.unpacker.pack(t, 1500, 1500 + k, *[0] * 15)), None, float(k)
+        )
     assert [s.values["elevator"] for s in got] == pytest.approx([0.06 * k for k in range(6)])
     assert [s.k for s in got] == list(range(got[0].k, got[0].k + 6))

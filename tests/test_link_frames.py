@@ -19,15 +19,19 @@ KEY = bytes(range(32))
 def _telemetry(codec, k: int) -> list[bytes]:
     """Three frames of one sample, encoded by pymavlink (the independent encoder)."""
     t_us = k * 20_000
-    msgs = [mavlink.MAVLink_attitude_message(t_us // 1000, 0.1, 0.2, 0.3, 0.0, 0.05 * k, 0.0),
-            mavlink.MAVLink_aoa_ssa_message(t_us, 1.5 + k, 0.0),
-            mavlink.MAVLink_actuator_output_status_message(t_us, 1, [float(-k)] + [0.0] * 31)]
+    msgs = [
+        mavlink.MAVLink_attitude_message(t_us // 1000, 0.1, 0.2, 0.3, 0.0, 0.05 * k, 0.0),
+        mavlink.MAVLink_aoa_ssa_message(t_us, 1.5 + k, 0.0),
+        mavlink.MAVLink_actuator_output_status_message(t_us, 1, [float(-k)] + [0.0] * 31),
+    ]
     return [m.pack(codec) for m in msgs]
 
 
 def _decoded(frames) -> list[tuple]:
-    return [(msgid, sysid, compid, layout_by_name(mavlink.mavlink_map[msgid].msgname).decode(payload))
-            for msgid, sysid, compid, payload in frames]
+    return [
+        (msgid, sysid, compid, layout_by_name(mavlink.mavlink_map[msgid].msgname).decode(payload))
+        for msgid, sysid, compid, payload in frames
+    ]
 
 
 def _reference(frames_bytes: list[bytes]) -> list[tuple]:
@@ -62,11 +66,13 @@ def _telemetry_v1(k: int, sysid: int = 4) -> list[bytes]:
     (SERVO_OUTPUT_RAW, STATUSTEXT), zeros at the end of the payload (which v1 keeps), encoded by pymavlink."""
     v1, codec = _v1_codec(sysid)
     t_us = 123_456_789 + k * 20_000
-    msgs = [v1.MAVLink_attitude_message(t_us // 1000, 0.1, -0.02 * k, 0.3, 0.0, 0.05 * k, 0.0),
-            v1.MAVLink_servo_output_raw_message(t_us & 0xFFFFFFFF, 0, 1500, 1500 + 10 * k, 1000, 0, 0, 0, 0, 0),
-            v1.MAVLink_heartbeat_message(1, 3, 0, 0, 4, 3),
-            v1.MAVLink_statustext_message(6, b"v1 text %d" % k),
-            v1.MAVLink_named_value_float_message(k, b"X", 0.0)]
+    msgs = [
+        v1.MAVLink_attitude_message(t_us // 1000, 0.1, -0.02 * k, 0.3, 0.0, 0.05 * k, 0.0),
+        v1.MAVLink_servo_output_raw_message(t_us & 0xFFFFFFFF, 0, 1500, 1500 + 10 * k, 1000, 0, 0, 0, 0, 0),
+        v1.MAVLink_heartbeat_message(1, 3, 0, 0, 4, 3),
+        v1.MAVLink_statustext_message(6, b"v1 text %d" % k),
+        v1.MAVLink_named_value_float_message(k, b"X", 0.0),
+    ]
     return [m.pack(codec) for m in msgs]
 
 
@@ -191,8 +197,11 @@ def test_mavlink1_encoder_matches_pymavlink_v1_byte_for_byte() -> None:
     assert fhat_frames(enc, 40_000, [0.0]) == ref.file.take()
     ref.send(v1.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, b"sysid 4 fault alarm raised |fhat| 2.5 deg"))
     assert alarm_text_frame(enc, 4, "raised", 2.5, "deg") == ref.file.take()  # no extension fields in v1
-    ref.send(v1.MAVLink_heartbeat_message(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0,
-                                          mavlink.MAV_STATE_ACTIVE, 3))
+    ref.send(
+        v1.MAVLink_heartbeat_message(
+            mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE, 3
+        )
+    )
     assert heartbeat_frame(enc) == ref.file.take()
     # what v1 cannot carry (an id above 255) goes out in MAVLink 2, and our parser reads both back
     frame = enc.encode(layout_by_name("AOA_SSA"), (1_000, 2.5, 0.0))

@@ -26,18 +26,24 @@ def test_default_map_is_the_contract() -> None:
     assert signals_for_plant(load_plant("paper-continuous")) == sig
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda r: r["measured"].update(alpha={"field": "AOA_SSB.AOA"}), "unknown MAVLink message 'AOA_SSB'"),
-    (lambda r: r["measured"].update(alpha={"field": "AOA_SSA.AOB"}), "AOA_SSA has no field 'AOB'"),
-    (lambda r: r["measured"].update(elevator={"field": "ACTUATOR_OUTPUT_STATUS.actuator[32]"}), "out of range"),
-    (lambda r: r["measured"].update(alpha={"field": "AOA_SSA.AOA", "scal": 2}), "unknown key 'scal'"),
-    (lambda r: r.update(output=["alpha"]), "unknown key 'output'"),
-    (lambda r: r.update(outputs=["alpha", "q"]), "plant has 1 output"),
-    (lambda r: r.update(outputs=["beta"]), "'beta', which is not in [signals.measured]"),
-    (lambda r: r["measured"].update(elevator={"field": "VFR_HUD.throttle"}), "VFR_HUD has no time_usec or time_boot_ms"),
-    (lambda r: r.update(instant="ATTITUDE"), "needs a time_usec field"),
-    (lambda r: r["command"].update(channels=[9]), "channels must be in 0..7"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda r: r["measured"].update(alpha={"field": "AOA_SSB.AOA"}), "unknown MAVLink message 'AOA_SSB'"),
+        (lambda r: r["measured"].update(alpha={"field": "AOA_SSA.AOB"}), "AOA_SSA has no field 'AOB'"),
+        (lambda r: r["measured"].update(elevator={"field": "ACTUATOR_OUTPUT_STATUS.actuator[32]"}), "out of range"),
+        (lambda r: r["measured"].update(alpha={"field": "AOA_SSA.AOA", "scal": 2}), "unknown key 'scal'"),
+        (lambda r: r.update(output=["alpha"]), "unknown key 'output'"),
+        (lambda r: r.update(outputs=["alpha", "q"]), "plant has 1 output"),
+        (lambda r: r.update(outputs=["beta"]), "'beta', which is not in [signals.measured]"),
+        (
+            lambda r: r["measured"].update(elevator={"field": "VFR_HUD.throttle"}),
+            "VFR_HUD has no time_usec or time_boot_ms",
+        ),
+        (lambda r: r.update(instant="ATTITUDE"), "needs a time_usec field"),
+        (lambda r: r["command"].update(channels=[9]), "channels must be in 0..7"),
+    ],
+)
 def test_bad_maps_are_one_line_errors_naming_the_problem(edit, message: str) -> None:
     raw = _raw()
     edit(raw)

@@ -13,19 +13,24 @@ from monitor.link.transports import ConnectionSpec, parse_connection, resolve
 from tests.mavlink1_signals import V1_SIGNALS
 
 
-@pytest.mark.parametrize("text, spec", [
-    ("udpin:127.0.0.1:14550", ConnectionSpec("udpin", "127.0.0.1", 14550)),
-    ("udp:127.0.0.1:14550", ConnectionSpec("udpin", "127.0.0.1", 14550)),
-    ("udpout:localhost:14551", ConnectionSpec("udpout", "localhost", 14551)),
-    ("tcp:127.0.0.1:5760", ConnectionSpec("tcp", "127.0.0.1", 5760)),
-    ("tcpin:[::1]:5761", ConnectionSpec("tcpin", "::1", 5761)),
-])
+@pytest.mark.parametrize(
+    "text, spec",
+    [
+        ("udpin:127.0.0.1:14550", ConnectionSpec("udpin", "127.0.0.1", 14550)),
+        ("udp:127.0.0.1:14550", ConnectionSpec("udpin", "127.0.0.1", 14550)),
+        ("udpout:localhost:14551", ConnectionSpec("udpout", "localhost", 14551)),
+        ("tcp:127.0.0.1:5760", ConnectionSpec("tcp", "127.0.0.1", 5760)),
+        ("tcpin:[::1]:5761", ConnectionSpec("tcpin", "::1", 5761)),
+    ],
+)
 def test_connections_as_mavproxy_writes_them(text: str, spec: ConnectionSpec) -> None:
     assert parse_connection(text) == spec
 
 
-@pytest.mark.parametrize("text", ["udpin:127.0.0.1", "serial:/dev/ttyUSB0:57600", "tcp:127.0.0.1:0",
-                                  "udpin:127.0.0.1:70000", "127.0.0.1:14550"])
+@pytest.mark.parametrize(
+    "text",
+    ["udpin:127.0.0.1", "serial:/dev/ttyUSB0:57600", "tcp:127.0.0.1:0", "udpin:127.0.0.1:70000", "127.0.0.1:14550"],
+)
 def test_bad_connections_are_one_line(text: str) -> None:
     with pytest.raises(UserError, match="expected udpin:HOST:PORT|needs the peer's port"):
         parse_connection(text)
@@ -43,20 +48,37 @@ def test_mavlink_port_in_use_is_one_line_exit_2(tmp_path) -> None:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
         taken.bind(("127.0.0.1", 0))
         port = taken.getsockname()[1]
-        out = subprocess.run([sys.executable, "-m", "monitor", "run", "--plant", "paper-continuous", "--gains",
-                              str(gains), "--mavlink", f"udpin:127.0.0.1:{port}"], capture_output=True, text=True,
-                             timeout=60)
+        out = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "monitor",
+                "run",
+                "--plant",
+                "paper-continuous",
+                "--gains",
+                str(gains),
+                "--mavlink",
+                f"udpin:127.0.0.1:{port}",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
     assert out.returncode == 2, out.stderr
     lines = [line for line in out.stderr.splitlines() if "error" in line]
     assert len(lines) == 1 and "in use" in lines[0] and "Traceback" not in out.stderr, out.stderr
 
 
-@pytest.mark.parametrize("endpoint, message", [
-    ("tcp/256.1.1.1:7447", "not a valid IP address"),
-    ("tcp/127.0.0.1", "PROTOCOL/HOST:PORT with a port"),
-    ("foo", "expected PROTOCOL/HOST:PORT"),
-    ("tcp/no-such-host.invalid:7447", "cannot resolve host"),
-])
+@pytest.mark.parametrize(
+    "endpoint, message",
+    [
+        ("tcp/256.1.1.1:7447", "not a valid IP address"),
+        ("tcp/127.0.0.1", "PROTOCOL/HOST:PORT with a port"),
+        ("foo", "expected PROTOCOL/HOST:PORT"),
+        ("tcp/no-such-host.invalid:7447", "cannot resolve host"),
+    ],
+)
 def test_bad_zenoh_endpoints_are_one_line_errors(endpoint: str, message: str) -> None:
     from monitor.wire.zenoh_session import build_config
 
@@ -82,26 +104,50 @@ def test_operator_mistakes_on_run_are_one_line_exit_2(tmp_path) -> None:
     gains = hand_made_gains_file(tmp_path / "gains.toml")
     fleet = tmp_path / "fleet.toml"
     fleet.write_text("vehicle = 3\n")
-    cases = [(["--queue", "0"], "--queue must be at least 1"),
-             (["--zenoh-connect", "tcp/256.1.1.1:7447"], "not a valid IP address"),
-             (["--fleet", str(fleet)], "'vehicle' must be tables"),
-             (["--mavlink", "udpin:no-such-host.invalid:14550"], "cannot resolve host")]
+    cases = [
+        (["--queue", "0"], "--queue must be at least 1"),
+        (["--zenoh-connect", "tcp/256.1.1.1:7447"], "not a valid IP address"),
+        (["--fleet", str(fleet)], "'vehicle' must be tables"),
+        (["--mavlink", "udpin:no-such-host.invalid:14550"], "cannot resolve host"),
+    ]
     for extra, message in cases:
-        out = subprocess.run([sys.executable, "-m", "monitor", "run", "--plant", "paper-continuous", "--gains",
-                              str(gains), "--mavlink", "udpin:127.0.0.1:0", *extra], capture_output=True, text=True,
-                             timeout=60)
+        out = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "monitor",
+                "run",
+                "--plant",
+                "paper-continuous",
+                "--gains",
+                str(gains),
+                "--mavlink",
+                "udpin:127.0.0.1:0",
+                *extra,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         assert out.returncode == 2 and message in out.stderr, (extra, out.stderr)
         assert "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1, out.stderr
 
 
 def test_a_closed_stdout_pipe_is_a_quiet_exit(tmp_path) -> None:
     """``fault-monitor subscribe | head``: every command runs through run_cli_command, which must stay quiet."""
-    script = ("import sys, types; from monitor.errors import run_cli_command\n"
-              "args = types.SimpleNamespace(command='subscribe', func=lambda a: [print('x' * 100) for _ in range(10**5)])\n"
-              "sys.exit(run_cli_command('fault-monitor', args))\n")
+    script = (
+        "import sys, types; from monitor.errors import run_cli_command\n"
+        "args = types.SimpleNamespace(command='subscribe', func=lambda a: [print('x' * 100) for _ in range(10**5)])\n"
+        "sys.exit(run_cli_command('fault-monitor', args))\n"
+    )
     (tmp_path / "talk.py").write_text(script)
-    proc = subprocess.run(f"{sys.executable} {tmp_path / 'talk.py'} | head -c 10 > /dev/null; echo ${{PIPESTATUS[0]}}",
-                          shell=True, executable="/bin/bash", capture_output=True, timeout=60)
+    proc = subprocess.run(
+        f"{sys.executable} {tmp_path / 'talk.py'} | head -c 10 > /dev/null; echo ${{PIPESTATUS[0]}}",
+        shell=True,
+        executable="/bin/bash",
+        capture_output=True,
+        timeout=60,
+    )
     assert proc.stderr == b"", proc.stderr
     assert proc.stdout.strip() == b"2"
 
@@ -109,8 +155,9 @@ def test_a_closed_stdout_pipe_is_a_quiet_exit(tmp_path) -> None:
 def _v1_sample(codec, v1, k: int) -> bytes:
     """One sample from a vehicle that speaks MAVLink 1 (ids below 256 only), as one datagram."""
     t_us = k * 1_000_000
-    return (v1.MAVLink_attitude_message(t_us // 1000, 0.0, 0.01, 0.0, 0.0, 0.0, 0.0).pack(codec)
-            + v1.MAVLink_servo_output_raw_message(t_us, 0, 1500, 1500, 1500, 0, 0, 0, 0, 0).pack(codec))
+    return v1.MAVLink_attitude_message(t_us // 1000, 0.0, 0.01, 0.0, 0.0, 0.0, 0.0).pack(
+        codec
+    ) + v1.MAVLink_servo_output_raw_message(t_us, 0, 1500, 1500, 1500, 0, 0, 0, 0, 0).pack(codec)
 
 
 @pytest.mark.parametrize("signed", [False, True])
@@ -124,17 +171,24 @@ def test_a_mavlink1_peer_is_answered_in_mavlink1_and_a_signed_link_refuses_it(tm
     from monitor.link.signing import Signer
     from monitor.link.transports import open_link
     from monitor.service.alarm import AlarmConfig
-    from monitor.service.pipeline import Pipeline
     from monitor.service.fleet_file import Fleet, load_model
+    from monitor.service.pipeline import Pipeline
     from monitor.service.vehicles import VehicleTable
     from monitor.wire.mavlink import mavlink, new_codec
     from tests.gains_files import hand_made_gains_file
 
     (tmp_path / "signals.toml").write_text(V1_SIGNALS)
-    model = load_model("paper-continuous", hand_made_gains_file(tmp_path / "gains.toml"), signals_file=tmp_path / "signals.toml")
+    model = load_model(
+        "paper-continuous", hand_made_gains_file(tmp_path / "gains.toml"), signals_file=tmp_path / "signals.toml"
+    )
     pipeline = Pipeline(VehicleTable(Fleet(model), AlarmConfig()))
-    link = open_link(parse_connection("udpin:127.0.0.1:0"), 0, pipeline.on_frames, pipeline.frames,
-                     Signer(bytes(range(32))) if signed else None)
+    link = open_link(
+        parse_connection("udpin:127.0.0.1:0"),
+        0,
+        pipeline.on_frames,
+        pipeline.frames,
+        Signer(bytes(range(32))) if signed else None,
+    )
     sent: list[tuple[bytes, object]] = []
     link.send = lambda data, peer: sent.append((data, peer))  # type: ignore[method-assign]
     old_peer, new_peer = ("127.0.0.1", 40001), ("127.0.0.1", 40002)

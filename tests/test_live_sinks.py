@@ -19,16 +19,28 @@ from tests.recordings import make_run
 
 
 def _sink(port: int, **kwargs: object) -> LiveSink:
-    return LiveSink(f"rerun+http://127.0.0.1:{port}/proxy", "fault-monitor", "test-recording", {"layout": "1"},
-                    "live test", **kwargs)
+    return LiveSink(
+        f"rerun+http://127.0.0.1:{port}/proxy",
+        "fault-monitor",
+        "test-recording",
+        {"layout": "1"},
+        "live test",
+        **kwargs,
+    )
 
 
 def test_viewer_addresses_are_checked() -> None:
     assert parse_viewer_url("rerun+http://127.0.0.1:9876/proxy") == ("127.0.0.1", 9876)
     assert parse_viewer_url("rerun+https://[::1]:443/proxy/") == ("::1", 443)
-    for bad in ("http://127.0.0.1:9876/proxy", "rerun://127.0.0.1:9876/proxy", "rerun+http://127.0.0.1/proxy",
-                "rerun+http://127.0.0.1:9876/", "rerun+http://127.0.0.1:99999/proxy", "rerun+http://:9876/proxy",
-                "127.0.0.1:9876"):
+    for bad in (
+        "http://127.0.0.1:9876/proxy",
+        "rerun://127.0.0.1:9876/proxy",
+        "rerun+http://127.0.0.1/proxy",
+        "rerun+http://127.0.0.1:9876/",
+        "rerun+http://127.0.0.1:99999/proxy",
+        "rerun+http://:9876/proxy",
+        "127.0.0.1:9876",
+    ):
         with pytest.raises(UserError, match="--rerun-url"):
             parse_viewer_url(bad)
 

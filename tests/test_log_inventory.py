@@ -32,16 +32,23 @@ def write_v1_log(path: Path, seconds: int = 40, h: float = 1.0) -> None:
     vehicle = v1.MAVLink(None, srcSystem=1, srcComponent=1)
     gcs = new_codec(255, 190)
     with open(path, "wb") as fh:
+
         def record(t_us: int, frame: bytes) -> None:
             fh.write(struct.pack(">Q", T0_US + t_us) + frame)
 
         for k in range(int(seconds / h)):
             t_us = 7_000_000 + int(k * h * 1e6)
             alpha = 2.0 * math.sin(0.3 * k)
-            record(t_us, v1.MAVLink_attitude_message(t_us // 1000, 0.0, math.radians(alpha), 0.0, 0.0, 0.0,
-                                                     0.0).pack(vehicle))
-            record(t_us + 1000, v1.MAVLink_servo_output_raw_message(t_us, 0, 1500, 1500 + 5 * k % 40, 1000, 1500, 0, 0,
-                                                                    0, 0).pack(vehicle))
+            record(
+                t_us,
+                v1.MAVLink_attitude_message(t_us // 1000, 0.0, math.radians(alpha), 0.0, 0.0, 0.0, 0.0).pack(vehicle),
+            )
+            record(
+                t_us + 1000,
+                v1.MAVLink_servo_output_raw_message(t_us, 0, 1500, 1500 + 5 * k % 40, 1000, 1500, 0, 0, 0, 0).pack(
+                    vehicle
+                ),
+            )
             record(t_us + 2000, v1.MAVLink_raw_imu_message(t_us, 0, 0, -1000, 0, 0, 0, 0, 0, 0).pack(vehicle))
             record(t_us + 3000, v1.MAVLink_vfr_hud_message(15.0, 15.0, 0, 40, 100.0, 0.0).pack(vehicle))
             record(t_us + 4000, v1.MAVLink_heartbeat_message(2, 3, 0, 0, 4, 3).pack(vehicle))
@@ -68,10 +75,14 @@ def test_the_inventory_counts_versions_messages_rates_and_sysids(tmp_path: Path)
     # the default map's messages are not in a v1 log: named, with the log's messages that could carry them
     smap = default_signal_map()
     line = explain_missing(inv, smap, ("alpha", "elevator"), sysid=1)
-    assert line.startswith("missing signals: alpha (AOA_SSA.AOA), elevator (ACTUATOR_OUTPUT_STATUS.actuator[0]): "
-                           "the log has no ACTUATOR_OUTPUT_STATUS or AOA_SSA from sysid 1"), line
-    assert line.endswith("; what the log has instead: angle of attack: none; actuator output: SERVO_OUTPUT_RAW 1.03 Hz; "
-                         "the instant (time_usec): RAW_IMU, SERVO_OUTPUT_RAW"), line
+    assert line.startswith(
+        "missing signals: alpha (AOA_SSA.AOA), elevator (ACTUATOR_OUTPUT_STATUS.actuator[0]): "
+        "the log has no ACTUATOR_OUTPUT_STATUS or AOA_SSA from sysid 1"
+    ), line
+    assert line.endswith(
+        "; what the log has instead: angle of attack: none; actuator output: SERVO_OUTPUT_RAW 1.03 Hz; "
+        "the instant (time_usec): RAW_IMU, SERVO_OUTPUT_RAW"
+    ), line
     assert "system ids are 1, 255" in explain_missing(inv, smap, ("alpha",), sysid=7)
 
 
@@ -93,8 +104,9 @@ def test_analyse_says_what_a_mavlink1_log_holds_and_reads_it_with_its_own_messag
     out = capsys.readouterr().out
     assert code == 0 and "log holds: 220 records over 39.0 s, 220 frames (MAVLink 1: 200, MAVLink 2: 20)" in out
     assert "log holds: system ids 1 (200 frames), 255 (20 frames)" in out
-    code = main(["analyse", str(log), "--plant", "paper-continuous", "--gains", str(gains), "--signals", str(signals),
-                 "--json"])
+    code = main(
+        ["analyse", str(log), "--plant", "paper-continuous", "--gains", str(gains), "--signals", str(signals), "--json"]
+    )
     report = json.loads(capsys.readouterr().out)
     assert code == 0 and report["samples"] == 40 and report["log"]["frames_v1"] == 200
     inv = report["log"]["inventory"]

@@ -9,16 +9,17 @@ import tomllib
 
 import numpy as np
 
+from monitor.checks.verify_losses import verify_losses
 from monitor.model.closed_loop import Gains, closed_loop, steady_state
 from monitor.model.delay_model import b0_of_tau, b0_polytope, input_sum
 from monitor.model.estimator import Estimator
 from monitor.model.loss_model import loss_modes, macro_steps
-from monitor.model.plant import load_plant
 from monitor.model.norms import contraction
-from monitor.checks.verify_losses import verify_losses
+from monitor.model.plant import load_plant
 from tests.designs import designed
 
 DELIVERED, COMMAND_LOST, SAMPLE_LOST = "delivered", "command", "sample"
+
 
 def design(objective: str, max_losses: int = 0):
     return designed("paper-continuous", "certified", objective, max_losses)
@@ -122,14 +123,22 @@ def test_verify_losses_never_calls_a_divergent_loop_stable():
     claimed = 0
     for _ in range(7):
         g = fast.gains
-        gains = Gains(L=g.L * rng.uniform(0.5, 1.6), M=g.M * rng.uniform(0.5, 1.6), K1=g.K1 + rng.normal(0, 0.3, (1, 1)),
-                      K2=g.K2 * rng.uniform(0.3, 1.1), K3=g.K3)
+        gains = Gains(
+            L=g.L * rng.uniform(0.5, 1.6),
+            M=g.M * rng.uniform(0.5, 1.6),
+            K1=g.K1 + rng.normal(0, 0.3, (1, 1)),
+            K2=g.K2 * rng.uniform(0.3, 1.1),
+            K3=g.K3,
+        )
         verdict = verify_losses(plant, gains, 2)
         if verdict.stable is not True:
             continue
         claimed += 1
-        for pattern in ([DELIVERED, SAMPLE_LOST, SAMPLE_LOST], [DELIVERED, COMMAND_LOST, COMMAND_LOST],
-                        [DELIVERED, COMMAND_LOST, SAMPLE_LOST]):
+        for pattern in (
+            [DELIVERED, SAMPLE_LOST, SAMPLE_LOST],
+            [DELIVERED, COMMAND_LOST, COMMAND_LOST],
+            [DELIVERED, COMMAND_LOST, SAMPLE_LOST],
+        ):
             events = [DELIVERED] * 6 + pattern * 50
             for tau in (plant.tau_min, plant.tau_max):
                 assert _growth(plant, gains, events, np.full(len(events), tau)) < 1.0
@@ -151,6 +160,8 @@ def test_cli_design_and_verify_with_max_losses(tmp_path):
     out = json.loads(proc.stdout)
     assert out["losses"]["stable"] is True and out["stable_with_losses"] is True
     separate = tmp_path / "separate.toml"  # unstable even without losses: no loss certificate can exist
-    proc = fm("design", "--plant", "paper-continuous", "--method", "separate", "--max-losses", "1", "--out", str(separate))
+    proc = fm(
+        "design", "--plant", "paper-continuous", "--method", "separate", "--max-losses", "1", "--out", str(separate)
+    )
     assert proc.returncode != 0 and not separate.exists()
     assert "consecutive" in proc.stderr and "Traceback" not in proc.stderr

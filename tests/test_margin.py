@@ -9,9 +9,9 @@ from importlib import resources
 
 import pytest
 
+from monitor.checks.verify import verify_gains
 from monitor.gains import read_gains
 from monitor.model.plant import load_plant, with_tau_max
-from monitor.checks.verify import verify_gains
 
 UNSTABLE_PLANT = """
 form = "continuous"
@@ -31,9 +31,28 @@ C = [[1.0, 0.0]]
 def margin_run(tmp_path_factory):
     d = tmp_path_factory.mktemp("margin")
     (d / "plant.toml").write_text(UNSTABLE_PLANT)
-    proc = subprocess.run([sys.executable, "-m", "monitor", "margin", "--plant", str(d / "plant.toml"), "--json",
-                           "--tolerance", "0.02", "--points", "3", "--out", str(d / "gains.toml"),
-                           "--png", str(d / "margin.png")], capture_output=True, text=True, timeout=180)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "monitor",
+            "margin",
+            "--plant",
+            str(d / "plant.toml"),
+            "--json",
+            "--tolerance",
+            "0.02",
+            "--points",
+            "3",
+            "--out",
+            str(d / "gains.toml"),
+            "--png",
+            str(d / "margin.png"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
     assert proc.returncode == 0, proc.stderr
     return d, json.loads(proc.stdout), proc.stderr
 

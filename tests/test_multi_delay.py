@@ -19,8 +19,12 @@ from monitor.model.delay_model import b0_of_tau, b0_polytope, realization
 from monitor.model.plant import plant_from_table
 
 CONTINUOUS = {
-    "form": "continuous", "h": 0.05,
-    "A_c": [[-1.2, 0.9], [-4.0, -1.5]], "B_c": [[-0.1], [-6.0]], "D_cf": [[-0.1], [-6.0]], "D_cd": [[0.0], [1.0]],
+    "form": "continuous",
+    "h": 0.05,
+    "A_c": [[-1.2, 0.9], [-4.0, -1.5]],
+    "B_c": [[-0.1], [-6.0]],
+    "D_cf": [[-0.1], [-6.0]],
+    "D_cd": [[0.0], [1.0]],
     "C": [[1.0, 0.0], [0.0, 1.0]],
 }
 
@@ -102,8 +106,13 @@ def _G(A_c, B_c, h, a):
 
 def _inside(vertices: np.ndarray, point: np.ndarray) -> bool:
     k = len(vertices)
-    res = linprog(np.zeros(k), A_eq=np.vstack([vertices.T, np.ones((1, k))]), b_eq=np.append(point, 1.0),
-                  bounds=[(0, None)] * k, method="highs")
+    res = linprog(
+        np.zeros(k),
+        A_eq=np.vstack([vertices.T, np.ones((1, k))]),
+        b_eq=np.append(point, 1.0),
+        bounds=[(0, None)] * k,
+        method="highs",
+    )
     return res.status == 0
 
 
@@ -120,9 +129,21 @@ def test_a_short_interval_is_the_ordinary_plant_and_a_constant_delay_the_nominal
 def test_a_discrete_plant_file_reaches_past_h_through_its_continuous_reconstruction():
     exact = lagged(0.05, 0.09)
     base = exact.lags.base
-    discrete = plant_from_table({"form": "discrete", "h": 0.05, "tau_min": 0.05, "tau_max": 0.09,
-                                 "A": base.A.tolist(), "B0": base.B0.tolist(), "B1": base.B1.tolist(),
-                                 "Df": base.Df.tolist(), "Dd": base.Dd.tolist(), "C": base.C.tolist()}, "d")
+    discrete = plant_from_table(
+        {
+            "form": "discrete",
+            "h": 0.05,
+            "tau_min": 0.05,
+            "tau_max": 0.09,
+            "A": base.A.tolist(),
+            "B0": base.B0.tolist(),
+            "B1": base.B1.tolist(),
+            "Df": base.Df.tolist(),
+            "Dd": base.Dd.tolist(),
+            "C": base.C.tolist(),
+        },
+        "d",
+    )
     assert np.allclose(discrete.A, exact.A, atol=1e-9) and np.allclose(discrete.B1, exact.B1, atol=1e-9)
 
 
@@ -140,8 +161,8 @@ LONG_DELAY_PLANT = str(Path(__file__).parents[1] / "docs" / "examples" / "paper-
 def test_a_certified_loop_holds_with_every_command_one_to_two_and_a_half_samples_late():
     """uniform:1:2.4 at h = 1 s: no command ever acts in its own interval. The design's certificate is checked
     by verify; the estimate on the vehicle's exact simulation settles within 5 % and stays there."""
-    from monitor.jsbsim_flights import ClosedLoop
     from monitor.checks.verify import verify_gains
+    from monitor.jsbsim_flights import ClosedLoop
     from monitor.model.estimator import Estimator
     from monitor.wire.specs import parse_delay_spec, parse_fault_spec
     from sim_vehicle.simulation import Simulation
@@ -153,8 +174,15 @@ def test_a_certified_loop_holds_with_every_command_one_to_two_and_a_half_samples
     assert verdict.stable and verdict.certificate_valid and verdict.bound_holds, verdict
     # the monitor's estimator answering each sample when it is sent: the drawn delay is the whole delay
     loop = ClosedLoop(Estimator(plant, result.gains))
-    loop.fly(Simulation(plant=plant.physical, sink=loop, steps=70, fault=parse_fault_spec("bias:2@20"),
-                        delay=parse_delay_spec("uniform:1:2.4", seed=3)))
+    loop.fly(
+        Simulation(
+            plant=plant.physical,
+            sink=loop,
+            steps=70,
+            fault=parse_fault_spec("bias:2@20"),
+            delay=parse_delay_spec("uniform:1:2.4", seed=3),
+        )
+    )
     taus = [p["tau"] for p in loop.truth.values() if p["tau"] is not None]
     assert len(taus) > 50 and min(taus) >= 1.0 and max(taus) > 2.0  # every command acted one to 2.4 samples late
     assert sum(p["in_force"] < p["k"] - 1 for p in loop.truth.values()) > 10  # often u(k-2) or older was in force
@@ -193,8 +221,20 @@ def test_margin_bisects_past_one_sample_and_its_design_verifies_there():
     from monitor.checks.margin import delay_margin
     from monitor.checks.verify import verify_gains
 
-    plant = plant_from_table({"form": "continuous", "h": 1.0, "tau_min": 0.0, "tau_max": 0.3, "A_c": [[-1.0]],
-                              "B_c": [[1.0]], "D_cf": [[1.0]], "D_cd": [[1.0]], "C": [[1.0]]}, "tiny")
+    plant = plant_from_table(
+        {
+            "form": "continuous",
+            "h": 1.0,
+            "tau_min": 0.0,
+            "tau_max": 0.3,
+            "A_c": [[-1.0]],
+            "B_c": [[1.0]],
+            "D_cf": [[1.0]],
+            "D_cd": [[1.0]],
+            "C": [[1.0]],
+        },
+        "tiny",
+    )
     margin = delay_margin(plant, tolerance=0.2, curve_points=2, up_to=1.9)
     assert margin.tau_max == pytest.approx(1.9) and margin.plant.lags is not None
     result = margin.design

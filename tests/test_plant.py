@@ -8,8 +8,8 @@ import sys
 import numpy as np
 import pytest
 
-from monitor.model.discretize import discretize
 from monitor.errors import UserError
+from monitor.model.discretize import discretize
 from monitor.model.plant import load_plant, parse_plant
 
 PAPER_A = np.array([[0.2759, 0.1839], [0.1379, 0.0921]])
@@ -37,9 +37,15 @@ def test_continuous_preset_discretised_at_zero_delay_gives_back_the_paper():
 def test_digest_depends_on_content_not_formatting():
     text = load_plant("paper").source
     assert text == "preset:paper"
-    a = parse_plant('form="discrete"\nh=1.0\ntau_min=0.0\ntau_max=0.4\nA=[[0.5]]\nB0=[[1.0]]\nB1=[[0.1]]\nC=[[1.0]]\nDf=[[1.0]]\nDd=[[1.0]]\n')
-    b = parse_plant('form = "discrete"\nh = 1.0\ntau_min = 0.0\ntau_max = 0.4\nA = [[ 0.5 ]]\nB0 = [[1.0]]\nB1 = [[0.1]]\nC = [[1.0]]\nDf = [[1.0]]\nDd = [[1.0]]\n')
-    c = parse_plant('form="discrete"\nh=1.0\ntau_min=0.0\ntau_max=0.4\nA=[[0.6]]\nB0=[[1.0]]\nB1=[[0.1]]\nC=[[1.0]]\nDf=[[1.0]]\nDd=[[1.0]]\n')
+    a = parse_plant(
+        'form="discrete"\nh=1.0\ntau_min=0.0\ntau_max=0.4\nA=[[0.5]]\nB0=[[1.0]]\nB1=[[0.1]]\nC=[[1.0]]\nDf=[[1.0]]\nDd=[[1.0]]\n'
+    )
+    b = parse_plant(
+        'form = "discrete"\nh = 1.0\ntau_min = 0.0\ntau_max = 0.4\nA = [[ 0.5 ]]\nB0 = [[1.0]]\nB1 = [[0.1]]\nC = [[1.0]]\nDf = [[1.0]]\nDd = [[1.0]]\n'
+    )
+    c = parse_plant(
+        'form="discrete"\nh=1.0\ntau_min=0.0\ntau_max=0.4\nA=[[0.6]]\nB0=[[1.0]]\nB1=[[0.1]]\nC=[[1.0]]\nDf=[[1.0]]\nDd=[[1.0]]\n'
+    )
     assert a.digest == b.digest != c.digest
 
 
@@ -69,7 +75,10 @@ C = [[1.0, 0.0]]
         (lambda t: t.replace("D_cd = [[0.0], [1.0]]", 'D_cd = "x"'), "D_cd"),
         (lambda t: t.replace('"continuous"', '"hybrid"'), "form"),
         (lambda t: t + "[actuator]\nlimt = 3\n", "actuator.limt"),
-        (lambda t: t + '[disturbance]\nsigma = 0.3\ntime_constant = 0.2\nturbulence = "lite"\n', "disturbance.turbulence"),
+        (
+            lambda t: t + '[disturbance]\nsigma = 0.3\ntime_constant = 0.2\nturbulence = "lite"\n',
+            "disturbance.turbulence",
+        ),
     ],
 )
 def test_malformed_plant_files_name_the_key_and_the_file(tmp_path, edit, key):
@@ -90,10 +99,18 @@ def test_good_file_loads(tmp_path):
 def test_cli_reports_a_bad_plant_in_one_line_with_exit_2(tmp_path):
     path = tmp_path / "bad.toml"
     path.write_text(GOOD + "bogus = 1\n")
-    proc = subprocess.run([sys.executable, "-m", "monitor", "verify", "--plant", str(path), "--L", "1,1", "--M", "1", "--K1", "0"],
-                          capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "monitor", "verify", "--plant", str(path), "--L", "1,1", "--M", "1", "--K1", "0"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.returncode == 2
     assert proc.stderr.strip().count("\n") == 0 and "'bogus'" in proc.stderr and "Traceback" not in proc.stderr
-    proc = subprocess.run([sys.executable, "-m", "monitor", "verify", "--plant", "no-such-preset", "--L", "1,1", "--M", "1", "--K1", "0"],
-                          capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "monitor", "verify", "--plant", "no-such-preset", "--L", "1,1", "--M", "1", "--K1", "0"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.returncode == 2 and "neither a preset" in proc.stderr

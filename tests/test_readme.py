@@ -33,15 +33,19 @@ RUN_GROUPS = {
 
 def test_every_block_carries_a_marker() -> None:
     problems = [f"README.md:{b.line}: {b.problem()}" for b in blocks() if b.problem()]
-    problems += [f"README.md:{line}: a code block indented by four spaces can carry no marker: fence it (```)"
-                 for line in indented_code_lines()]
+    problems += [
+        f"README.md:{line}: a code block indented by four spaces can carry no marker: fence it (```)"
+        for line in indented_code_lines()
+    ]
     assert not problems, "\n".join(problems)
 
 
 def test_every_run_group_has_its_test() -> None:
     groups = {b.arg("group") for b in blocks() if b.kind == "run"}
-    assert groups == set(RUN_GROUPS), f"run groups without a test: {sorted(groups - set(RUN_GROUPS))}; " \
-                                      f"tests without a group: {sorted(set(RUN_GROUPS) - groups)}"
+    assert groups == set(RUN_GROUPS), (
+        f"run groups without a test: {sorted(groups - set(RUN_GROUPS))}; "
+        f"tests without a group: {sorted(set(RUN_GROUPS) - groups)}"
+    )
     for node in RUN_GROUPS.values():  # each named test exists (a rename must follow here)
         path, name = node.split("::")
         module = importlib.import_module(path.removesuffix(".py").replace("/", "."))
@@ -62,8 +66,11 @@ def _not_run_commands() -> list[tuple[Block, int, str]]:
 
 def test_commands_not_run_still_parse() -> None:
     """Flags of blocks that are not run exist and take the values given (the real parsers, nothing executed)."""
-    problems = [f"README.md:{line}: {command}\n  {complaint}" for _b, line, command in _not_run_commands()
-                if (complaint := check_command_parses(command))]
+    problems = [
+        f"README.md:{line}: {command}\n  {complaint}"
+        for _b, line, command in _not_run_commands()
+        if (complaint := check_command_parses(command))
+    ]
     assert not problems, "\n".join(problems)
     assert len(_not_run_commands()) >= 8  # the parse check is not silently empty
 
@@ -90,9 +97,9 @@ def _layouts(kind: str):
 def test_signal_maps_are_read_by_the_map_reader(block: Block) -> None:
     """A map with ``outputs`` as run and analyse read it (for a plant with as many outputs as C has rows, when the
     block shows C); one without, as identify reads it for each of its models."""
-    from monitor.pipelines.identify_log import map_for
     from monitor.link.signals import parse_signals
     from monitor.model.identification import MODELS
+    from monitor.pipelines.identify_log import map_for
 
     raw = tomllib.loads(block.text)
     table, where, layouts = raw["signals"], f"README.md:{block.line}", _layouts(block.arg("layouts"))

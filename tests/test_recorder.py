@@ -60,8 +60,13 @@ def test_file_holds_a_blueprint_and_passes_rerun_verify(tmp_path: Path) -> None:
     cli = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
     if cli is None:
         pytest.skip("rerun CLI not on PATH")
-    done = subprocess.run([cli, "rrd", "verify", str(path)], capture_output=True, text=True, timeout=60,
-                          env={**os.environ, "RERUN_ANALYTICS": "0"})
+    done = subprocess.run(
+        [cli, "rrd", "verify", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "RERUN_ANALYTICS": "0"},
+    )
     assert done.returncode == 0, done.stderr
 
 
@@ -119,8 +124,13 @@ CHILD = textwrap.dedent("""
 def test_sigterm_mid_run_leaves_a_complete_recording(tmp_path: Path) -> None:
     path = tmp_path / "killed.rrd"
     root = Path(__file__).resolve().parents[1]
-    child = subprocess.Popen([sys.executable, "-c", CHILD, str(path)], stdout=subprocess.PIPE, text=True, cwd=root,
-                             env={**os.environ, "RERUN_ANALYTICS": "0", "PYTHONPATH": str(root)})
+    child = subprocess.Popen(
+        [sys.executable, "-c", CHILD, str(path)],
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=root,
+        env={**os.environ, "RERUN_ANALYTICS": "0", "PYTHONPATH": str(root)},
+    )
     try:
         assert child.stdout is not None
         assert child.stdout.readline().strip() == "ready"
@@ -144,8 +154,17 @@ def test_numpy_fields_from_the_estimator_are_accepted(tmp_path: Path) -> None:
     samples, _ = make_run(4, n=10)
     with RrdRecorder(path) as rec:
         for s in samples:
-            rec.submit(dataclasses.replace(s, x_hat=np.array(s.x_hat), f_hat=np.array(s.f_hat), u=np.array(s.u),
-                                           residual=np.array(s.residual), alpha=np.float64(s.alpha), alarm=np.bool_(s.alarm)))
+            rec.submit(
+                dataclasses.replace(
+                    s,
+                    x_hat=np.array(s.x_hat),
+                    f_hat=np.array(s.f_hat),
+                    u=np.array(s.u),
+                    residual=np.array(s.residual),
+                    alpha=np.float64(s.alpha),
+                    alarm=np.bool_(s.alarm),
+                )
+            )
     recording = load_recording(path)
     assert set(recording.vehicles) == {4}
     got_samples = recording.vehicles[4].samples
@@ -164,8 +183,13 @@ def test_recording_properties_describe_plant_and_gains(tmp_path: Path) -> None:
     from monitor.service.rrd_stream import recording_properties
 
     plant = load_plant("paper")
-    gains = Gains(L=np.full((plant.n, plant.l), 0.5), M=np.full((plant.q, plant.l), 0.1),
-                  K1=np.zeros((plant.m, plant.l)), K2=np.zeros((plant.m, plant.m)), K3=np.zeros((plant.m, plant.q)))
+    gains = Gains(
+        L=np.full((plant.n, plant.l), 0.5),
+        M=np.full((plant.q, plant.l), 0.1),
+        K1=np.zeros((plant.m, plant.l)),
+        K2=np.zeros((plant.m, plant.m)),
+        K3=np.zeros((plant.m, plant.q)),
+    )
     props = recording_properties(plant, gains, "certified", "gains.toml")
     path = tmp_path / "props.rrd"
     RrdRecorder(path, properties=props).close()

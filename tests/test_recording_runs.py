@@ -16,9 +16,24 @@ from monitor.service.records import SampleRecord
 
 
 def _record(k: int, run: int, wall: float) -> SampleRecord:
-    return SampleRecord(sysid=1, k=k, t=float(k), wall=wall, y=[0.1], alpha=0.1, q=0.0, elevator=None,
-                        x_hat=[0.0, 0.0], f_hat=[0.01 * k], u=[0.0], residual=[0.0], tau_obs=None,
-                        processing_s=1e-5, alarm=False, run=run)
+    return SampleRecord(
+        sysid=1,
+        k=k,
+        t=float(k),
+        wall=wall,
+        y=[0.1],
+        alpha=0.1,
+        q=0.0,
+        elevator=None,
+        x_hat=[0.0, 0.0],
+        f_hat=[0.01 * k],
+        u=[0.0],
+        residual=[0.0],
+        tau_obs=None,
+        processing_s=1e-5,
+        alarm=False,
+        run=run,
+    )
 
 
 def test_a_restarted_vehicle_keeps_both_runs(tmp_path: Path) -> None:
@@ -40,8 +55,13 @@ def test_a_restarted_vehicle_keeps_both_runs(tmp_path: Path) -> None:
 def tiny_disk(tmp_path: Path):
     mount = tmp_path / "tiny"
     mount.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=48k", "tmpfs", str(mount)],
-                                           capture_output=True).returncode != 0:
+    if (
+        os.geteuid() != 0
+        or subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", "size=48k", "tmpfs", str(mount)], capture_output=True
+        ).returncode
+        != 0
+    ):
         pytest.skip("needs root to mount a tiny tmpfs (CI and the developers' machines are root)")
     try:
         yield mount
@@ -77,8 +97,11 @@ def test_the_daemon_reports_a_failing_recording_in_its_status_and_exit_code(tiny
             with sim_daemon(tmp_path, port, bus, 1, steps=400, speedup=100) as sim:
                 assert sim.wait(60) == 0
             wait_for(lambda: "disk full" in monitor.log(), 10, what="the recording error")
-            wait_for(lambda: any("recording_error" in p for _, p in bus.query("uav/1/fault/status")), 10,
-                     what="recording_error in the status")
+            wait_for(
+                lambda: any("recording_error" in p for _, p in bus.query("uav/1/fault/status")),
+                10,
+                what="recording_error in the status",
+            )
             assert monitor.stop(timeout=30) == 1  # closing a file on a full disk may take the recorder's 10-s wait
             log = monitor.log()
     error_line = next(line for line in log.splitlines() if "disk full" in line)

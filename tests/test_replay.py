@@ -29,7 +29,9 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def test_single_vehicle_json_has_contract_keys_and_right_scores(capsys: pytest.CaptureFixture[str], fleet: Path) -> None:
+def test_single_vehicle_json_has_contract_keys_and_right_scores(
+    capsys: pytest.CaptureFixture[str], fleet: Path
+) -> None:
     code, out, _ = replay(capsys, str(fleet), "--json", "--sysid", "2")
     assert code == 0
     report = json.loads(out)
@@ -88,8 +90,9 @@ def test_truncated_file_is_one_line_exit_2(capsys: pytest.CaptureFixture[str], f
     assert code == 2 and len(err.strip().splitlines()) == 1 and "rerun rrd optimize" in err
 
 
-def test_missing_foreign_and_unknown_vehicle_are_user_errors(capsys: pytest.CaptureFixture[str], tmp_path: Path,
-                                                              fleet: Path) -> None:
+def test_missing_foreign_and_unknown_vehicle_are_user_errors(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, fleet: Path
+) -> None:
     import rerun as rr
 
     foreign = tmp_path / "foreign.rrd"

@@ -23,8 +23,9 @@ def test_single_sample_config_and_vector_magnitude_is_callers() -> None:
     assert run(alarm, [2.0, 2.0, 1.9]) == ["raised", None, "cleared"]
 
 
-@pytest.mark.parametrize("kwargs", [dict(threshold=0.0), dict(threshold=1.0, clear=2.0), dict(samples=0),
-                                    dict(threshold=1.0, clear=-0.1)])
+@pytest.mark.parametrize(
+    "kwargs", [dict(threshold=0.0), dict(threshold=1.0, clear=2.0), dict(samples=0), dict(threshold=1.0, clear=-0.1)]
+)
 def test_rejects_inconsistent_config(kwargs) -> None:
     with pytest.raises(ValueError):
         AlarmConfig(**kwargs)

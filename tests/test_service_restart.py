@@ -21,8 +21,7 @@ SILENCE = 2.0  # > restart_silence (1 s)
 
 
 def _table(gains: Path) -> VehicleTable:
-    return VehicleTable(Fleet(load_model("paper-continuous", gains)), AlarmConfig(), timeout=30.0,
-                        restart_silence=1.0)
+    return VehicleTable(Fleet(load_model("paper-continuous", gains)), AlarmConfig(), timeout=30.0, restart_silence=1.0)
 
 
 def _heartbeat(table: VehicleTable, route: str, now: float) -> list:

@@ -50,8 +50,9 @@ def test_vehicles_have_separate_state_and_expire(gains_path: Path) -> None:
 
 
 def test_restart_from_a_new_peer_starts_fresh_but_a_replay_does_not(gains_path: Path) -> None:
-    table = VehicleTable(Fleet(load_model("paper-continuous", gains_path)), AlarmConfig(), timeout=30.0,
-                         restart_silence=1.0)
+    table = VehicleTable(
+        Fleet(load_model("paper-continuous", gains_path)), AlarmConfig(), timeout=30.0, restart_silence=1.0
+    )
     for k in range(10):
         feed(table, 1, k, "A", k * 0.01)
     assert feed(table, 1, 2, "X", 0.095) is None  # replay while A is live: stale
@@ -61,8 +62,10 @@ def test_restart_from_a_new_peer_starts_fresh_but_a_replay_does_not(gains_path: 
 
 def test_fleet_file(tmp_path: Path, gains_path: Path) -> None:
     fleet_toml = tmp_path / "fleet.toml"
-    fleet_toml.write_text(f'[vehicle.3]\nplant = "paper-continuous"\ngains = "{gains_path}"\n'
-                          f'[vehicle.4]\nplant = "paper-continuous"\ngains = "{gains_path}"\n')
+    fleet_toml.write_text(
+        f'[vehicle.3]\nplant = "paper-continuous"\ngains = "{gains_path}"\n'
+        f'[vehicle.4]\nplant = "paper-continuous"\ngains = "{gains_path}"\n'
+    )
     fleet = load_fleet(fleet_toml, None)
     assert fleet.model_for(3) is fleet.model_for(4) and fleet.model_for(5) is None
     fleet_toml.write_text('[vehicle.x]\nplant = "paper"\n')

@@ -35,8 +35,12 @@ def test_segment_matrices_are_the_ramp_integrals():
     phi, g1, g2 = segment_matrices(MODEL.A_c, T)
     assert np.allclose(phi, expm(MODEL.A_c * T), atol=1e-14)
     # Gamma1 and Gamma2 by the ODEs they satisfy: G1' = e^{At}, G2' = G1
-    sol = solve_ivp(lambda t, z: np.concatenate([(MODEL.A_c @ z[:4].reshape(2, 2)).ravel(), z[:4], z[4:8]]),
-                    (0, T), np.concatenate([np.eye(2).ravel(), np.zeros(8)]), **TOL)
+    sol = solve_ivp(
+        lambda t, z: np.concatenate([(MODEL.A_c @ z[:4].reshape(2, 2)).ravel(), z[:4], z[4:8]]),
+        (0, T),
+        np.concatenate([np.eye(2).ravel(), np.zeros(8)]),
+        **TOL,
+    )
     assert np.allclose(g1, sol.y[4:8, -1].reshape(2, 2), atol=1e-10)
     assert np.allclose(g2, sol.y[8:12, -1].reshape(2, 2), atol=1e-10)
 

@@ -13,13 +13,13 @@ from monitor.errors import UserError
 from monitor.model.plant import load_plant
 from monitor.wire.mavlink import new_codec, sample_index
 from monitor.wire.specs import Excitation, parse_delay_spec, parse_excite_spec, parse_fault_spec
+from monitor.wire.telemetry import AircraftSample, encode_sample
 from sim_vehicle.cli import build_parser
 from sim_vehicle.config import settings_from_args
 from sim_vehicle.dynamics import Airframe, LinearFlightModel
 from sim_vehicle.flight_model import FlightModel
 from sim_vehicle.jsbsim_model import AircraftSpec, JSBSimFlightModel
 from sim_vehicle.simulation import Simulation
-from monitor.wire.telemetry import AircraftSample, encode_sample
 from tests.sim_recorder import Recorder
 
 PLANT = load_plant("paper-continuous")
@@ -101,8 +101,10 @@ def test_prbs_is_seeded_and_its_dwell_is_bounded():
 
 def test_an_aircraft_vehicle_file_sets_the_aircraft_flags(tmp_path):
     conf = tmp_path / "vehicle.toml"
-    conf.write_text('aircraft = "c172p"\nairspeed = 90\naltitude = 4500\nrate = 25\nturbulence = "light"\n'
-                    'excite = "prbs:2:30"\nfault = "bias:2@100"\n')
+    conf.write_text(
+        'aircraft = "c172p"\nairspeed = 90\naltitude = 4500\nrate = 25\nturbulence = "light"\n'
+        'excite = "prbs:2:30"\nfault = "bias:2@100"\n'
+    )
     args = parse_args_with_config(build_parser(), ["run", "--config", str(conf), "--rate", "50"])
     settings = settings_from_args(args)
     spec = settings.aircraft
@@ -112,12 +114,24 @@ def test_an_aircraft_vehicle_file_sets_the_aircraft_flags(tmp_path):
     plain = settings_from_args(parse_args_with_config(build_parser(), ["run"]))
     assert plain.aircraft is None and plain.plant.name == "paper-continuous" and plain.h == 1.0
     with pytest.raises(UserError, match="--excite and --autopilot"):
-        settings_from_args(parse_args_with_config(build_parser(), ["run", "--excite", "prbs:1:5", "--autopilot", "-0.5"]))
+        settings_from_args(
+            parse_args_with_config(build_parser(), ["run", "--excite", "prbs:1:5", "--autopilot", "-0.5"])
+        )
 
 
 def test_aircraft_telemetry_is_the_contract_plus_pitch_and_vfr_hud_in_one_datagram():
-    sample = AircraftSample(sysid=3, k=7, t=0.35, alpha_deg=1.25, q_deg_s=-2.0, elevator_deg=4.3, theta_deg=3.0,
-                            airspeed_m_s=51.4, attitude=(0.01, 1.5, 0.002, -0.003), hud=(51.0, 86.4, 71, 914.4, -0.2))
+    sample = AircraftSample(
+        sysid=3,
+        k=7,
+        t=0.35,
+        alpha_deg=1.25,
+        q_deg_s=-2.0,
+        elevator_deg=4.3,
+        theta_deg=3.0,
+        airspeed_m_s=51.4,
+        attitude=(0.01, 1.5, 0.002, -0.003),
+        hud=(51.0, 86.4, 71, 914.4, -0.2),
+    )
     data = encode_sample(new_codec(3, 1), sample, 0.05)
     msgs = {m.get_type(): m for m in new_codec(255, 190).parse_buffer(data)}
     assert list(msgs) == ["ATTITUDE", "AOA_SSA", "VFR_HUD", "ACTUATOR_OUTPUT_STATUS"]

@@ -17,9 +17,9 @@ import pytest
 
 from monitor.errors import UserError
 from monitor.wire.specs import Excitation, parse_delay_spec, parse_fault_spec
+from monitor.wire.telemetry import AircraftSample
 from sim_vehicle.jsbsim_model import AircraftSpec, JSBSimFlightModel, jsbsim_seed, step_size
 from sim_vehicle.simulation import Simulation
-from monitor.wire.telemetry import AircraftSample
 from tests.sim_recorder import Recorder
 
 REPO = Path(__file__).resolve().parent.parent
@@ -30,13 +30,27 @@ def c172p(**kw) -> JSBSimFlightModel:
     return JSBSimFlightModel(AircraftSpec("c172p", **kw))
 
 
-def fly(steps: int, fault: str | None = None, seed: int = 0, turbulence: str = "none", excite=None,
-        delay: str = "const:0.01") -> tuple[Simulation, Recorder]:
+def fly(
+    steps: int,
+    fault: str | None = None,
+    seed: int = 0,
+    turbulence: str = "none",
+    excite=None,
+    delay: str = "const:0.01",
+) -> tuple[Simulation, Recorder]:
     """c172p at 20 Hz with nobody commanding: it holds trim (or flies the excitation)."""
     rec = Recorder()
     model = c172p(turbulence=turbulence, seed=seed)
-    sim = Simulation(None, rec, steps=steps, model=model, fault=parse_fault_spec(fault), seed=seed,
-                     delay=parse_delay_spec(delay, seed=seed), excite=excite)
+    sim = Simulation(
+        None,
+        rec,
+        steps=steps,
+        model=model,
+        fault=parse_fault_spec(fault),
+        seed=seed,
+        delay=parse_delay_spec(delay, seed=seed),
+        excite=excite,
+    )
     while not sim.done:
         sim.run_until(sim.next_time())
     model.close()
@@ -182,17 +196,28 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
     # stdout a pipe and block-buffered, as under a service manager or CI: with PYTHONUNBUFFERED set (many
     # developers' shells) a message printed at the wrong moment reaches the pipe at once and a leak at exit hides
     env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
-    return subprocess.run([sys.executable, "-m", "sim_vehicle", "run", "--no-zenoh", "--steps", "5", *args],
-                          capture_output=True, text=True, timeout=60, cwd=REPO, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "sim_vehicle", "run", "--no-zenoh", "--steps", "5", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=REPO,
+        env=env,
+    )
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--aircraft", "c172p", "--airspeed", "300"],
-     "--aircraft c172p does not trim at 300 kt, 3000 ft: Trim Failed (Sorry, udot doesn't appear to be trimmable)"),
-    (["--aircraft", "no-such-plane"], "--aircraft no-such-plane: JSBSim has no such aircraft"),
-    (["--aircraft", "c172p", "--wind", "paper"], "--wind does not go with --aircraft"),
-    (["--airspeed", "90"], "--airspeed goes with --aircraft NAME"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            ["--aircraft", "c172p", "--airspeed", "300"],
+            "--aircraft c172p does not trim at 300 kt, 3000 ft: Trim Failed (Sorry, udot doesn't appear to be trimmable)",
+        ),
+        (["--aircraft", "no-such-plane"], "--aircraft no-such-plane: JSBSim has no such aircraft"),
+        (["--aircraft", "c172p", "--wind", "paper"], "--wind does not go with --aircraft"),
+        (["--airspeed", "90"], "--airspeed goes with --aircraft NAME"),
+    ],
+)
 def test_an_aircraft_that_cannot_fly_is_one_line_and_exit_2(args, message):
     proc = _cli(*args)
     assert proc.returncode == 2, proc.stderr
@@ -202,10 +227,13 @@ def test_an_aircraft_that_cannot_fly_is_one_line_and_exit_2(args, message):
 
 
 def test_sim_vehicle_import_help_and_version_do_not_load_jsbsim():
-    code = ("import sys, sim_vehicle, sim_vehicle.cli, sim_vehicle.simulation, sim_vehicle.config;"
-            "sim_vehicle.cli.build_parser().format_help(); print('jsbsim' in sys.modules)")
+    code = (
+        "import sys, sim_vehicle, sim_vehicle.cli, sim_vehicle.simulation, sim_vehicle.config;"
+        "sim_vehicle.cli.build_parser().format_help(); print('jsbsim' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=REPO)
     assert out.stdout.strip() == "False", out.stderr
-    version = subprocess.run([sys.executable, "-m", "sim_vehicle", "--version"], capture_output=True, text=True,
-                             timeout=60, cwd=REPO)
+    version = subprocess.run(
+        [sys.executable, "-m", "sim_vehicle", "--version"], capture_output=True, text=True, timeout=60, cwd=REPO
+    )
     assert version.returncode == 0 and version.stdout.startswith("sim-vehicle 0.") and "JSBSim 1.3" in version.stdout

@@ -46,8 +46,9 @@ def predict(truth: list[dict], fault, gain: float) -> np.ndarray:
         x = xs[-1]
         u = -gain * x[0] if row["tau"] is not None else u_prev
         D = discretize(PLANT.continuous, PLANT.h, row["tau"] if row["tau"] is not None else 0.0)
-        xs.append(D.A @ x + D.B0[:, 0] * u + D.B1[:, 0] * u_prev + D.Df[:, 0] * fault.f(row["k"])
-                  + D.Dd[:, 0] * row["d"][0])
+        xs.append(
+            D.A @ x + D.B0[:, 0] * u + D.B1[:, 0] * u_prev + D.Df[:, 0] * fault.f(row["k"]) + D.Dd[:, 0] * row["d"][0]
+        )
         u_prev = u
     return np.array(xs)
 
@@ -55,8 +56,7 @@ def predict(truth: list[dict], fault, gain: float) -> np.ndarray:
 def test_closed_loop_matches_the_discrete_model_with_the_true_delay():
     rec = Recorder()
     fault = parse_fault_spec("bias:2@5")
-    sim = Simulation(PLANT, rec, steps=25, fault=fault, delay=parse_delay_spec("uniform:0:0.46", seed=3),
-                     x0=[1.0, 0.0])
+    sim = Simulation(PLANT, rec, steps=25, fault=fault, delay=parse_delay_spec("uniform:0:0.46", seed=3), x0=[1.0, 0.0])
     fly(sim, rec, gain=0.5)
     truth = rec.truth
     assert [t["k"] for t in truth] == list(range(25)) and all(t["status"] == "applied" for t in truth)
@@ -128,8 +128,13 @@ def test_link_statistics_match_the_requested_probabilities():
 def test_lossy_run_counts_add_up_and_is_reproducible():
     def run():
         rec = Recorder()
-        sim = Simulation(PLANT, rec, steps=300, impairment=Impairment(loss=0.2, duplicate=0.1, reorder=0.05, seed=1),
-                         delay=parse_delay_spec("uniform:0:0.46", seed=1))
+        sim = Simulation(
+            PLANT,
+            rec,
+            steps=300,
+            impairment=Impairment(loss=0.2, duplicate=0.1, reorder=0.05, seed=1),
+            delay=parse_delay_spec("uniform:0:0.46", seed=1),
+        )
         fly(sim, rec)
         return sim, rec
 
@@ -146,8 +151,14 @@ def test_lossy_run_counts_add_up_and_is_reproducible():
 
 def test_paper_wind_and_faults_reach_the_truth():
     rec = Recorder()
-    sim = Simulation(PLANT, rec, steps=40, fault=parse_fault_spec("stuck:3@10+loe:0.5@20-30"),
-                     wind=Wind(), delay=parse_delay_spec("const:0.1"))
+    sim = Simulation(
+        PLANT,
+        rec,
+        steps=40,
+        fault=parse_fault_spec("stuck:3@10+loe:0.5@20-30"),
+        wind=Wind(),
+        delay=parse_delay_spec("const:0.1"),
+    )
     fly(sim, rec)
     t = rec.truth
     assert t[0]["d"] == [pytest.approx(0.001)] and t[1]["d"] == [pytest.approx(0.1 * 0.9922 * 0.01)]
@@ -157,8 +168,14 @@ def test_paper_wind_and_faults_reach_the_truth():
 
 def test_autopilot_reports_its_own_command_and_applies_it_after_the_drawn_delay() -> None:
     rec = Recorder()
-    sim = Simulation(PLANT, rec, steps=30, fault=parse_fault_spec("bias:2@10"),
-                     delay=parse_delay_spec("uniform:0:0.4", seed=3), autopilot=np.array([[-0.3]]))
+    sim = Simulation(
+        PLANT,
+        rec,
+        steps=30,
+        fault=parse_fault_spec("bias:2@10"),
+        delay=parse_delay_spec("uniform:0:0.4", seed=3),
+        autopilot=np.array([[-0.3]]),
+    )
     while not sim.done:
         sim.run_until(sim.next_time())
         assert sim.receive_command(max(sim.k, 0), 25.0, sim.next_time() or 0.0) == "ignored_autopilot"
@@ -173,8 +190,9 @@ def test_autopilot_reports_its_own_command_and_applies_it_after_the_drawn_delay(
 
 def test_an_autopilot_flight_counts_its_samples_as_flown_on_board_not_answered():
     rec = Recorder()
-    sim = Simulation(PLANT, rec, steps=40, delay=parse_delay_spec("uniform:0:0.46", seed=2),
-                     autopilot=np.array([[-0.5]]))
+    sim = Simulation(
+        PLANT, rec, steps=40, delay=parse_delay_spec("uniform:0:0.46", seed=2), autopilot=np.array([[-0.5]])
+    )
     fly(sim, rec)  # the test-side controller answers too: the vehicle ignores it while it flies itself
     s, c = sim.stats.samples, sim.stats.commands
     assert s["onboard"] == 40 and s["applied"] == 0 and s["late"] == 0 and s["lost"] == 0

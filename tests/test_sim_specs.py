@@ -39,8 +39,10 @@ def test_no_fault(text):
     assert s.events == () and s.onset is None and s.f(10) == 0.0 and s.effectiveness(10) == 1.0
 
 
-@pytest.mark.parametrize("text", ["bias@2", "bias:2", "foo:1@2", "loe:1.5@3", "bias:1@5-3", "bias:2@20+",
-                                  "bias:nan@3", "bias:2@-1", "stuck@"])
+@pytest.mark.parametrize(
+    "text",
+    ["bias@2", "bias:2", "foo:1@2", "loe:1.5@3", "bias:1@5-3", "bias:2@20+", "bias:nan@3", "bias:2@-1", "stuck@"],
+)
 def test_bad_fault_spec_is_one_line_naming_it(text):
     with pytest.raises(UserError) as info:
         parse_fault_spec(text)
@@ -48,8 +50,21 @@ def test_bad_fault_spec_is_one_line_naming_it(text):
     assert f"'{text}'" in msg and "\n" not in msg
 
 
-@pytest.mark.parametrize("text", ["const", "const:-1", "uniform:1", "uniform:2:1", "normal:0.2:-1", "normal:x:1",
-                                  "gamma:1:2", "trace:", "trace:/definitely/missing.txt", "const:inf"])
+@pytest.mark.parametrize(
+    "text",
+    [
+        "const",
+        "const:-1",
+        "uniform:1",
+        "uniform:2:1",
+        "normal:0.2:-1",
+        "normal:x:1",
+        "gamma:1:2",
+        "trace:",
+        "trace:/definitely/missing.txt",
+        "const:inf",
+    ],
+)
 def test_bad_delay_spec_is_one_line_naming_it(text):
     with pytest.raises(UserError) as info:
         parse_delay_spec(text)

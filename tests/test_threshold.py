@@ -9,10 +9,10 @@ import sys
 import numpy as np
 import pytest
 
+from monitor.checks.threshold import fault_threshold
+from monitor.errors import UserError
 from monitor.model.closed_loop import closed_loop, steady_state
 from monitor.model.delay_model import b0_of_tau, tau_grid
-from monitor.errors import UserError
-from monitor.checks.threshold import fault_threshold
 from tests.designs import designed
 
 
@@ -35,8 +35,9 @@ def _worst_case_peak(plant, gains, rng, steps: int = 80, ends: bool = False) -> 
     """|f_hat| at the end of a run whose d(k) takes the sign that maximises it, delays random (time-varying),
     anywhere in the interval or (``ends``) switching between its two ends."""
     steady = steady_state(plant, gains)
-    taus = (rng.choice([plant.tau_min, plant.tau_max], steps) if ends
-            else rng.uniform(plant.tau_min, plant.tau_max, steps))
+    taus = (
+        rng.choice([plant.tau_min, plant.tau_max], steps) if ends else rng.uniform(plant.tau_min, plant.tau_max, steps)
+    )
     loops = [closed_loop(plant, gains, b0_of_tau(plant, float(t)), steady=steady) for t in taus]
     # e_f(steps) = sum_j C Phi B d(j): choose each d(j) = sign of its coefficient
     row = loops[0].C_ef[0].copy()
@@ -94,12 +95,28 @@ def test_hand_written_gains_on_both_presets(tmp_path, preset, name):
 
 
 def test_cli_refuses_unstable_gains_and_auto_without_a_bound(tmp_path):
-    unstable = fm("threshold", "--plant", "paper", "--gains", str(_hand_gains(tmp_path, "unstable")),
-                  "--disturbance-bound", "0.1", "--json")
+    unstable = fm(
+        "threshold",
+        "--plant",
+        "paper",
+        "--gains",
+        str(_hand_gains(tmp_path, "unstable")),
+        "--disturbance-bound",
+        "0.1",
+        "--json",
+    )
     assert unstable.returncode != 0 and unstable.stdout == ""
     assert len(unstable.stderr.strip().splitlines()) == 1 and "no threshold" in unstable.stderr
-    auto = fm("run", "--plant", "paper", "--gains", str(_hand_gains(tmp_path, "printed")), "--force",
-              "--alarm-threshold", "auto")
+    auto = fm(
+        "run",
+        "--plant",
+        "paper",
+        "--gains",
+        str(_hand_gains(tmp_path, "printed")),
+        "--force",
+        "--alarm-threshold",
+        "auto",
+    )
     errors = [line for line in auto.stderr.splitlines() if "error:" in line]  # --force adds a warning line
     assert auto.returncode == 2 and len(errors) == 1 and "needs --disturbance-bound" in errors[0]
 
@@ -128,8 +145,16 @@ def test_cli_json_and_errors(tmp_path, fast):
     assert doc["per_unit_disturbance"] == pytest.approx(min(doc["bound_paths"], doc["bound_blocks"]), rel=1e-6)
     bad = fm("threshold", "--plant", "paper-continuous", "--gains", str(gains), "--disturbance-bound", "nan")
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
-    auto = fm("analyse", str(tmp_path / "missing.tlog"), "--plant", "paper-continuous", "--gains", str(gains),
-              "--alarm-threshold", "auto")
+    auto = fm(
+        "analyse",
+        str(tmp_path / "missing.tlog"),
+        "--plant",
+        "paper-continuous",
+        "--gains",
+        str(gains),
+        "--alarm-threshold",
+        "auto",
+    )
     assert auto.returncode == 2 and "no such log file" in auto.stderr
 
 
@@ -144,8 +169,12 @@ def test_alarm_threshold_auto_is_the_bound_with_its_margin(fast):
     fleet = Fleet(SimpleNamespace(plant=plant, gains=SimpleNamespace(gains=result.gains)))
 
     def alarm(threshold, disturbance):
-        return alarm_from_args(argparse.Namespace(alarm_threshold=threshold, disturbance_bound=disturbance,
-                                                  alarm_clear=None, alarm_samples=2), fleet)
+        return alarm_from_args(
+            argparse.Namespace(
+                alarm_threshold=threshold, disturbance_bound=disturbance, alarm_clear=None, alarm_samples=2
+            ),
+            fleet,
+        )
 
     config = alarm("auto", 0.1)
     assert config.threshold == pytest.approx(AUTO_MARGIN * fault_threshold(plant, result.gains, 0.1).threshold)

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monitor.model.closed_loop import Gains
-from monitor.design.paper import lemma3_K2_K3
-from monitor.model.plant import load_plant
-from monitor.model.norms import hinf_norm
 from monitor.checks.verify import _growth_rate, verify_gains
+from monitor.design.paper import lemma3_K2_K3
+from monitor.model.closed_loop import Gains
+from monitor.model.norms import hinf_norm
+from monitor.model.plant import load_plant
 
 
 def test_hinf_norm_of_a_first_order_lag_peaks_at_dc():
@@ -22,7 +22,10 @@ def test_hinf_norm_finds_a_sharp_resonance():
     A = r * np.array([[np.cos(w0), -np.sin(w0)], [np.sin(w0), np.cos(w0)]])
     B, C = np.array([[1.0], [0.0]]), np.array([[1.0, 0.0]])
     grid = np.linspace(0, np.pi, 200001)
-    exact = max(abs((C @ np.linalg.solve(np.exp(1j * w) * np.eye(2) - A, B)).item()) for w in grid[(grid > 1.25) & (grid < 1.35)])
+    exact = max(
+        abs((C @ np.linalg.solve(np.exp(1j * w) * np.eye(2) - A, B)).item())
+        for w in grid[(grid > 1.25) & (grid < 1.35)]
+    )
     assert hinf_norm(A, B, C) == pytest.approx(exact, rel=1e-5)
 
 

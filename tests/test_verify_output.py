@@ -8,8 +8,26 @@ import sys
 
 
 def _verify(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "monitor", "verify", "--plant", "paper", "--L", "1.87,1.63",
-                           "--M", "0.9", "--K1", "-0.5", *args], capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "monitor",
+            "verify",
+            "--plant",
+            "paper",
+            "--L",
+            "1.87,1.63",
+            "--M",
+            "0.9",
+            "--K1",
+            "-0.5",
+            *args,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 def test_verify_prints_every_gain_and_marks_the_assumed_ones() -> None:

@@ -16,8 +16,18 @@ from monitor.wire.mavlink import new_codec
 from monitor.wire.telemetry import SAMPLE_FIELDS, AircraftSample, Sample, encode_sample, quantities, wire_values
 
 H = 0.05
-AIRCRAFT = AircraftSample(sysid=3, k=7, t=0.35, alpha_deg=1.25, q_deg_s=-2.0, elevator_deg=4.3, theta_deg=3.0,
-                          airspeed_m_s=51.4, attitude=(0.01, 1.5, 0.002, -0.003), hud=(51.0, 86.0, 71.0, 914.4, -0.2))
+AIRCRAFT = AircraftSample(
+    sysid=3,
+    k=7,
+    t=0.35,
+    alpha_deg=1.25,
+    q_deg_s=-2.0,
+    elevator_deg=4.3,
+    theta_deg=3.0,
+    airspeed_m_s=51.4,
+    attitude=(0.01, 1.5, 0.002, -0.003),
+    hud=(51.0, 86.0, 71.0, 914.4, -0.2),
+)
 
 
 def _through_the_link(data: bytes, names: list[str]) -> dict[str, float]:

@@ -53,12 +53,27 @@ from monitor.model.estimator import report_pole
 from monitor.model.plant import Plant
 from monitor.wire import TURBULENCE_INTENSITY
 
-__all__ = ["gust_sigma_ft_s", "scaled_disturbance", "NoiseFigures", "fhat_noise", "upcrossing_rate",
-           "gaussian_threshold", "turbulence_threshold", "gaussian_bias", "step_response", "detectable_bias",
-           "Detectability", "detectability", "FALSE_ALARMS_PER_HOUR", "WITHIN_S", "PROBABILITY"]
+__all__ = [
+    "gust_sigma_ft_s",
+    "scaled_disturbance",
+    "NoiseFigures",
+    "fhat_noise",
+    "upcrossing_rate",
+    "gaussian_threshold",
+    "turbulence_threshold",
+    "gaussian_bias",
+    "step_response",
+    "detectable_bias",
+    "Detectability",
+    "detectability",
+    "FALSE_ALARMS_PER_HOUR",
+    "WITHIN_S",
+    "PROBABILITY",
+]
 
 # the defaults live in the light package module, so that the command's help text does not import this one
 from monitor.checks import FALSE_ALARMS_PER_HOUR, PROBABILITY, WITHIN_S  # noqa: E402
+
 GRID = 5  # constant delays over the interval for the worst case
 
 # JSBSim's MIL-F-8785C vertical gust intensity sigma_w (ft/s), FGWinds: above 2000 ft AGL the probability-of-
@@ -66,8 +81,20 @@ GRID = 5  # constant delays over the interval for the worst case
 # between. Checked against JSBSim 1.3.3 flights of the c172p at 100 kt, seed 1 (std of turb-down-fps, same
 # random stream): moderate/light 1.415 (table 1.418) at 3000 ft and 1.489 (1.497) at 7000 ft, severe/light
 # 2.89 (2.91) over the first minute at 3000 ft (later the aircraft lost altitude).
-_POE_ALTITUDES_FT = (500.0, 1750.0, 3750.0, 7500.0, 15000.0, 25000.0, 35000.0, 45000.0, 55000.0, 65000.0, 75000.0,
-                     80000.0)
+_POE_ALTITUDES_FT = (
+    500.0,
+    1750.0,
+    3750.0,
+    7500.0,
+    15000.0,
+    25000.0,
+    35000.0,
+    45000.0,
+    55000.0,
+    65000.0,
+    75000.0,
+    80000.0,
+)
 _POE_TABLE = {
     3: (6.6, 6.9, 7.4, 6.7, 4.6, 2.7, 0.4, 0.0, 0.0, 0.0, 0.0, 0.0),
     4: (8.6, 9.6, 10.6, 10.1, 8.0, 6.6, 5.0, 4.2, 2.7, 0.0, 0.0, 0.0),
@@ -96,23 +123,32 @@ def scaled_disturbance(plant: Plant, level: str, altitude_ft: float) -> tuple[fl
     """``(sigma, time_constant, ratio)`` of the plant's ``[disturbance]`` at turbulence ``level``; one-line errors."""
     dist = plant.disturbance
     if dist is None:
-        raise UserError(f"plant {plant.name} has no [disturbance] table: identify it from a flight in turbulence, or "
-                        "give --disturbance-bound")
+        raise UserError(
+            f"plant {plant.name} has no [disturbance] table: identify it from a flight in turbulence, or "
+            "give --disturbance-bound"
+        )
     if dist.turbulence is None:
-        raise UserError(f"plant {plant.name}: its [disturbance] table does not say which turbulence it was measured "
-                        "in (key turbulence), so it cannot be scaled to another level")
+        raise UserError(
+            f"plant {plant.name}: its [disturbance] table does not say which turbulence it was measured "
+            "in (key turbulence), so it cannot be scaled to another level"
+        )
     if level == "none":
-        raise UserError("--turbulence none: no turbulence, nothing to set a threshold against; pick a level or give "
-                        "--disturbance-bound")
+        raise UserError(
+            "--turbulence none: no turbulence, nothing to set a threshold against; pick a level or give "
+            "--disturbance-bound"
+        )
     measured = gust_sigma_ft_s(dist.turbulence, altitude_ft)
     if measured <= 0:
-        raise UserError(f"plant {plant.name}: its [disturbance] was measured in turbulence '{dist.turbulence}', "
-                        "which has no intensity to scale from")
+        raise UserError(
+            f"plant {plant.name}: its [disturbance] was measured in turbulence '{dist.turbulence}', "
+            "which has no intensity to scale from"
+        )
     ratio = gust_sigma_ft_s(level, altitude_ft) / measured
     return dist.sigma * ratio, dist.time_constant, ratio
 
 
 # --- the Gaussian noise on f_hat ----------------------------------------------------------------------------
+
 
 @dataclass
 class NoiseFigures:
@@ -125,11 +161,15 @@ class NoiseFigures:
 
 def _loops(plant: Plant, gains: Gains, points: int = GRID) -> list[tuple[float, LoopMatrices]]:
     steady = steady_state(plant, gains)
-    return [(float(t), closed_loop(plant, gains, b0_of_tau(plant, float(t)), steady=steady))
-            for t in tau_grid(plant, points)]
+    return [
+        (float(t), closed_loop(plant, gains, b0_of_tau(plant, float(t)), steady=steady))
+        for t in tau_grid(plant, points)
+    ]
 
 
-def _noise_at(loop: LoopMatrices, p: int, sigma: float, time_constant: float, h: float, keep: float = 0.0) -> tuple[float, float]:
+def _noise_at(
+    loop: LoopMatrices, p: int, sigma: float, time_constant: float, h: float, keep: float = 0.0
+) -> tuple[float, float]:
     """``(v0, v1)``: variance and lag-one covariance of the reported f_hat with the shaping filter in the loop."""
     A, B, C = _augmented(loop, p, sigma, time_constant, h, keep)
     P = scipy.linalg.solve_discrete_lyapunov(A, B @ B.T)
@@ -152,8 +192,15 @@ def gaussian_threshold(std: float, rho: float, h: float, per_hour: float) -> flo
     return std * math.sqrt(2.0 * math.log(base / per_hour)) if base > per_hour else 0.0
 
 
-def fhat_noise(plant: Plant, gains: Gains, sigma: float, time_constant: float, per_hour: float,
-               report_time_constant: float | None = None, points: int = GRID) -> tuple[NoiseFigures, float]:
+def fhat_noise(
+    plant: Plant,
+    gains: Gains,
+    sigma: float,
+    time_constant: float,
+    per_hour: float,
+    report_time_constant: float | None = None,
+    points: int = GRID,
+) -> tuple[NoiseFigures, float]:
     """``(noise, threshold)`` at the constant delay of the grid with the highest threshold; one-line errors."""
     if not (sigma > 0 and time_constant > 0):
         raise UserError(f"the disturbance needs sigma > 0 and time_constant > 0, got {sigma:g} and {time_constant:g}")
@@ -170,19 +217,28 @@ def fhat_noise(plant: Plant, gains: Gains, sigma: float, time_constant: float, p
     assert best is not None  # the delay grid has at least one point
     noise, c = best
     if not c > 0:
-        raise UserError(f"{per_hour:g} false alarms per hour is more than |f_hat| crosses even 0 "
-                        f"({2 * 3600 * upcrossing_rate(0.0, noise.std, noise.rho, plant.h):.3g} per hour): ask for fewer")
+        raise UserError(
+            f"{per_hour:g} false alarms per hour is more than |f_hat| crosses even 0 "
+            f"({2 * 3600 * upcrossing_rate(0.0, noise.std, noise.rho, plant.h):.3g} per hour): ask for fewer"
+        )
     return best
 
 
-def turbulence_threshold(plant: Plant, gains: Gains, level: str, altitude_ft: float = 3000.0,
-                         per_hour: float = FALSE_ALARMS_PER_HOUR, report_time_constant: float | None = None) -> float:
+def turbulence_threshold(
+    plant: Plant,
+    gains: Gains,
+    level: str,
+    altitude_ft: float = 3000.0,
+    per_hour: float = FALSE_ALARMS_PER_HOUR,
+    report_time_constant: float | None = None,
+) -> float:
     """The Gaussian alarm threshold alone (``run --alarm-threshold auto --turbulence LEVEL``)."""
     sigma, time_constant, _ = scaled_disturbance(plant, level, altitude_ft)
     return fhat_noise(plant, gains, sigma, time_constant, per_hour, report_time_constant)[1]
 
 
 # --- the fault's step response and the smallest bias ---------------------------------------------------------
+
 
 def _step(loop: LoopMatrices, p: int, samples: int, keep: float = 0.0) -> np.ndarray:
     """``s(j)``, j = 0..samples, of one loop: the reported f_hat after a unit bias from sample 0 (``1 - e_f``,
@@ -196,36 +252,48 @@ def _step(loop: LoopMatrices, p: int, samples: int, keep: float = 0.0) -> np.nda
     return reported
 
 
-def step_response(plant: Plant, gains: Gains, samples: int, report_time_constant: float | None = None,
-                  points: int = GRID) -> np.ndarray:
+def step_response(
+    plant: Plant, gains: Gains, samples: int, report_time_constant: float | None = None, points: int = GRID
+) -> np.ndarray:
     """``s(j)``, j = 0..samples: f_hat after a unit bias from sample 0, the smallest over constant delays."""
     keep = report_pole(plant.h, report_time_constant)
-    worst: np.ndarray = np.min([_step(loop, plant.p, samples, keep) for _, loop in _loops(plant, gains, points)],
-                               axis=0)
+    worst: np.ndarray = np.min(
+        [_step(loop, plant.p, samples, keep) for _, loop in _loops(plant, gains, points)], axis=0
+    )
     return worst
 
 
-def _augmented(loop: LoopMatrices, p: int, sigma: float, time_constant: float, h: float,
-               keep: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _augmented(
+    loop: LoopMatrices, p: int, sigma: float, time_constant: float, h: float, keep: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(A, B, C)`` of the loop driven by the Gauss-Markov ``d`` through its shaping filter, with the reported
     estimate's low-pass ``f_rep(k) = keep f_rep(k-1) + (1 - keep) f_hat(k)`` last; C gives ``f_rep`` (no fault:
     ``f_hat = -e_f``). State ``[xi; d; f_rep(k-1)]``."""
     N, q = loop.A.shape[0], loop.C_ef.shape[0]
     a = math.exp(-h / time_constant)
     C = np.hstack([-(1.0 - keep) * loop.C_ef, np.zeros((q, p)), keep * np.eye(q)])
-    A = np.block([[loop.A, loop.B[:, :p], np.zeros((N, q))],
-                  [np.zeros((p, N)), a * np.eye(p), np.zeros((p, q))],
-                  [C]])
+    A = np.block([[loop.A, loop.B[:, :p], np.zeros((N, q))], [np.zeros((p, N)), a * np.eye(p), np.zeros((p, q))], [C]])
     B = np.zeros((N + p + q, p))
-    B[N:N + p] = math.sqrt(1.0 - a * a) * sigma * np.eye(p)
+    B[N : N + p] = math.sqrt(1.0 - a * a) * sigma * np.eye(p)
     if np.max(np.abs(np.linalg.eigvals(A))) >= 1.0:
         raise UserError("the loop is unstable at a constant delay in the interval (see fault-monitor verify)")
     return A, B, C
 
 
-def gaussian_bias(plant: Plant, gains: Gains, sigma: float, time_constant: float, threshold: float, samples: int,
-                  alarm_samples: int, probability: float, report_time_constant: float | None = None,
-                  realizations: int = 4000, seed: int = 0, points: int = GRID) -> tuple[float, float]:
+def gaussian_bias(
+    plant: Plant,
+    gains: Gains,
+    sigma: float,
+    time_constant: float,
+    threshold: float,
+    samples: int,
+    alarm_samples: int,
+    probability: float,
+    report_time_constant: float | None = None,
+    realizations: int = 4000,
+    seed: int = 0,
+    points: int = GRID,
+) -> tuple[float, float]:
     """``(b, t)``: the bias the alarm detects within ``samples`` of onset with ``probability``, and the median
     detection time (s) at that bias, for the linear loop in the Gauss-Markov air, worst constant delay.
 
@@ -305,11 +373,19 @@ class Detectability:
         return asdict(self)
 
 
-def detectability(plant: Plant, gains: Gains, *, disturbance_bound: float | None = None,
-                  turbulence: str | None = None, altitude_ft: float = 3000.0,
-                  false_alarms_per_hour: float = FALSE_ALARMS_PER_HOUR, within_s: float = WITHIN_S,
-                  alarm_samples: int = 2, probability: float = PROBABILITY,
-                  report_time_constant: float | None = None) -> Detectability:
+def detectability(
+    plant: Plant,
+    gains: Gains,
+    *,
+    disturbance_bound: float | None = None,
+    turbulence: str | None = None,
+    altitude_ft: float = 3000.0,
+    false_alarms_per_hour: float = FALSE_ALARMS_PER_HOUR,
+    within_s: float = WITHIN_S,
+    alarm_samples: int = 2,
+    probability: float = PROBABILITY,
+    report_time_constant: float | None = None,
+) -> Detectability:
     """The figures described in the module docstring; exactly one of ``disturbance_bound`` and ``turbulence``.
 
     ``report_time_constant``: the low-pass of the reported estimate the alarm watches (the gains' fault_time_constant)."""
@@ -328,11 +404,15 @@ def detectability(plant: Plant, gains: Gains, *, disturbance_bound: float | None
         raise UserError("the loop has a pole at 1 (a constant fault has no steady state)") from None
     samples = int(math.floor(within_s / plant.h + 1e-9))
     s = step_response(plant, gains, samples, report_time_constant)
-    common = dict(alarm_samples=alarm_samples, within_s=within_s, step_response=s.tolist(),
-                  report_time_constant=report_time_constant)
+    common = dict(
+        alarm_samples=alarm_samples,
+        within_s=within_s,
+        step_response=s.tolist(),
+        report_time_constant=report_time_constant,
+    )
     if disturbance_bound is not None:
-        from monitor.checks.threshold import fault_threshold
         from monitor.checks import AUTO_MARGIN
+        from monitor.checks.threshold import fault_threshold
 
         bound = fault_threshold(plant, gains, disturbance_bound)
         c0 = bound.threshold
@@ -340,18 +420,42 @@ def detectability(plant: Plant, gains: Gains, *, disturbance_bound: float | None
         if not c > 0:
             raise UserError("the proven bound is 0 (no disturbance reaches f_hat): any threshold works")
         b, j = detectable_bias(s, c + c0, alarm_samples)
-        return Detectability(mode="bounded", threshold=c, clear=0.5 * c, bias=b, detected_at_s=j * plant.h,
-                             step_at=float(s[j]) if j >= 0 else math.nan, false_alarms_per_hour=0.0,
-                             disturbance_bound=float(disturbance_bound), noise_bound=c0,
-                             noise_bound_method=bound.method, **common)
+        return Detectability(
+            mode="bounded",
+            threshold=c,
+            clear=0.5 * c,
+            bias=b,
+            detected_at_s=j * plant.h,
+            step_at=float(s[j]) if j >= 0 else math.nan,
+            false_alarms_per_hour=0.0,
+            disturbance_bound=float(disturbance_bound),
+            noise_bound=c0,
+            noise_bound_method=bound.method,
+            **common,
+        )
     assert turbulence is not None  # exactly one of the two (checked above)
     sigma, time_constant, ratio = scaled_disturbance(plant, turbulence, altitude_ft)
     noise, c = fhat_noise(plant, gains, sigma, time_constant, false_alarms_per_hour, report_time_constant)
-    b, t = gaussian_bias(plant, gains, sigma, time_constant, c, samples, alarm_samples, probability,
-                         report_time_constant)
+    b, t = gaussian_bias(
+        plant, gains, sigma, time_constant, c, samples, alarm_samples, probability, report_time_constant
+    )
     j = min(int(round(t / plant.h)), samples) if math.isfinite(t) else -1
-    return Detectability(mode="turbulence", threshold=c, clear=0.5 * c, bias=b, detected_at_s=t,
-                         step_at=float(s[j]) if j >= 0 else math.nan, false_alarms_per_hour=false_alarms_per_hour,
-                         probability=probability, turbulence=turbulence, altitude_ft=altitude_ft, sigma_d=sigma,
-                         time_constant=time_constant, sigma_ratio=ratio, fhat_std=noise.std, fhat_rho=noise.rho,
-                         tau_worst=noise.tau, **common)
+    return Detectability(
+        mode="turbulence",
+        threshold=c,
+        clear=0.5 * c,
+        bias=b,
+        detected_at_s=t,
+        step_at=float(s[j]) if j >= 0 else math.nan,
+        false_alarms_per_hour=false_alarms_per_hour,
+        probability=probability,
+        turbulence=turbulence,
+        altitude_ft=altitude_ft,
+        sigma_d=sigma,
+        time_constant=time_constant,
+        sigma_ratio=ratio,
+        fhat_std=noise.std,
+        fhat_rho=noise.rho,
+        tau_worst=noise.tau,
+        **common,
+    )

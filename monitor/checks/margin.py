@@ -54,9 +54,14 @@ def search_ceiling(plant: Plant, up_to: float | None = None) -> float:
     return (plant.lags.first + MAX_LAG_PARTS) * plant.h * (1.0 - 1e-6)
 
 
-def delay_margin(plant: Plant, tolerance: float | None = None, curve_points: int = 6,
-                 progress: Callable[[str], None] | None = None, up_to: float | None = None,
-                 **options: Any) -> Margin:
+def delay_margin(
+    plant: Plant,
+    tolerance: float | None = None,
+    curve_points: int = 6,
+    progress: Callable[[str], None] | None = None,
+    up_to: float | None = None,
+    **options: Any,
+) -> Margin:
     """Bisection on ``tau_max`` in ``[tau_min, search_ceiling)`` to ``tolerance`` (default h/200), then the curve
     below it. Past h each probe is a lagged plant (``monitor.model.long_delay``)."""
     say = progress or (lambda _text: None)
@@ -65,8 +70,10 @@ def delay_margin(plant: Plant, tolerance: float | None = None, curve_points: int
     lo_plant, lo_design = _try(plant, plant.tau_min, options)
     probes += 1
     if lo_design is None:
-        raise UserError(f"no certified design for plant '{plant.name}' even with a constant delay tau = {plant.tau_min}: "
-                        "no delay margin")
+        raise UserError(
+            f"no certified design for plant '{plant.name}' even with a constant delay tau = {plant.tau_min}: "
+            "no delay margin"
+        )
     lo, hi = plant.tau_min, search_ceiling(plant, up_to)
     hi_plant, hi_design = _try(plant, hi, options)
     probes += 1
@@ -76,7 +83,10 @@ def delay_margin(plant: Plant, tolerance: float | None = None, curve_points: int
         mid = 0.5 * (lo + hi)
         mid_plant, mid_design = _try(plant, mid, options)
         probes += 1
-        say(f"tau_max = {mid:.4f} s: " + (f"certified, gamma_e = {mid_design.gamma_e:.4f}" if mid_design else "no certificate"))
+        say(
+            f"tau_max = {mid:.4f} s: "
+            + (f"certified, gamma_e = {mid_design.gamma_e:.4f}" if mid_design else "no certificate")
+        )
         if mid_design is None:
             hi = mid
         else:
@@ -94,5 +104,6 @@ def delay_margin(plant: Plant, tolerance: float | None = None, curve_points: int
             curve.append({"tau_max": float(t), "gamma_e": float(result.gamma_e)})
             say(f"curve: tau_max = {t:.4f} s, gamma_e = {result.gamma_e:.4f}")
     failed_at = float(hi) if hi_design is None else None
-    return Margin(tau_max=float(lo), design=lo_design, plant=lo_plant, curve=curve, probes=probes,
-                  no_certificate_at=failed_at)
+    return Margin(
+        tau_max=float(lo), design=lo_design, plant=lo_plant, curve=curve, probes=probes, no_certificate_at=failed_at
+    )

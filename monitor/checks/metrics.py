@@ -31,8 +31,9 @@ def _arr(values: ArrayLike, dtype: type = float) -> np.ndarray:
     return np.asarray(values, dtype=dtype).reshape(-1)
 
 
-def settling_steps(k: ArrayLike, f_hat: ArrayLike, f: ArrayLike, onset: int, size: float,
-                   tol: float = 0.05, stop: int | None = None) -> int | None:
+def settling_steps(
+    k: ArrayLike, f_hat: ArrayLike, f: ArrayLike, onset: int, size: float, tol: float = 0.05, stop: int | None = None
+) -> int | None:
     """Steps after ``onset`` from which ``|f_hat - f| <= tol * |size|`` holds on every later sample.
 
     The window is ``onset <= k < stop`` (``stop`` None: to the end), so an intermittent fault is scored
@@ -62,8 +63,9 @@ def rms(values: ArrayLike) -> float | None:
     return float(np.sqrt(np.mean(v * v))) if v.size else None
 
 
-def rms_error(k: ArrayLike, estimate: ArrayLike, truth: ArrayLike, start: int | None = None,
-              stop: int | None = None) -> float | None:
+def rms_error(
+    k: ArrayLike, estimate: ArrayLike, truth: ArrayLike, start: int | None = None, stop: int | None = None
+) -> float | None:
     """RMS of ``truth - estimate`` (e.g. ``e_f = f - f_hat``) on samples ``start <= k < stop``."""
     kk = _arr(k, np.int64)
     window = np.ones(kk.size, bool)
@@ -116,5 +118,4 @@ def percentiles(values: ArrayLike) -> dict[str, float] | None:
     if not v.size:
         return None
     p50, p99 = np.percentile(v, [50, 99])
-    return {"n": int(v.size), "mean": float(v.mean()), "p50": float(p50), "p99": float(p99),
-            "max": float(v.max())}
+    return {"n": int(v.size), "mean": float(v.mean()), "p50": float(p50), "p99": float(p99), "max": float(v.max())}

@@ -38,9 +38,9 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
-from monitor.model.closed_loop import Gains, closed_loop, steady_state
-from monitor.model.delay_model import b0_of_tau, b0_polytope, tau_grid, nominal_point
 from monitor.errors import UserError
+from monitor.model.closed_loop import Gains, closed_loop, steady_state
+from monitor.model.delay_model import b0_of_tau, b0_polytope, nominal_point, tau_grid
 from monitor.model.norms import dual_norms, induced_norms, norm_factor
 from monitor.model.plant import Plant
 
@@ -139,28 +139,56 @@ def fault_threshold(plant: Plant, gains: Gains, disturbance_bound: float) -> Thr
     channels = [_channel_proofs(c, A, B, nominal, head_terms, contracting) for c in C]
     proven = [ch for ch in channels if ch["bound"] is not None]
     if len(proven) < len(channels):
-        raise UserError("no threshold: the loop is not proven stable for time-varying delays (no common quadratic "
-                        f"norm contracts, nor products of up to {head_terms} samples; see fault-monitor verify)")
+        raise UserError(
+            "no threshold: the loop is not proven stable for time-varying delays (no common quadratic "
+            f"norm contracts, nor products of up to {head_terms} samples; see fault-monitor verify)"
+        )
     worst = max(proven, key=lambda ch: ch["bound"])  # the threshold is on the largest |f_hat_i|
     per_unit = worst["bound"] * (1.0 + 1e-9)  # floating-point slack on sums of thousands of terms
     l1, tau_l1 = frozen_l1(plant, gains)
     return ThresholdBound(
-        threshold=per_unit * disturbance_bound, per_unit_disturbance=per_unit,
-        disturbance_bound=float(disturbance_bound), frozen_l1=l1, tau_frozen_worst=tau_l1,
-        ratio_to_frozen=per_unit / l1 if l1 > 0 else float("inf"), method=worst["method"],
-        bound_paths=worst["paths"], bound_blocks=worst["blocks"], ellipsoid=worst["ellipsoid"],
-        common_rate=worst["rate"], path_depth=worst["depth"], head_terms=head_terms, block=worst["block"],
-        block_contraction=worst["contraction"], vertices=len(A), seconds=time.perf_counter() - started,
+        threshold=per_unit * disturbance_bound,
+        per_unit_disturbance=per_unit,
+        disturbance_bound=float(disturbance_bound),
+        frozen_l1=l1,
+        tau_frozen_worst=tau_l1,
+        ratio_to_frozen=per_unit / l1 if l1 > 0 else float("inf"),
+        method=worst["method"],
+        bound_paths=worst["paths"],
+        bound_blocks=worst["blocks"],
+        ellipsoid=worst["ellipsoid"],
+        common_rate=worst["rate"],
+        path_depth=worst["depth"],
+        head_terms=head_terms,
+        block=worst["block"],
+        block_contraction=worst["contraction"],
+        vertices=len(A),
+        seconds=time.perf_counter() - started,
     )
 
 
-def _channel_proofs(c: np.ndarray, A: np.ndarray, B: np.ndarray, nominal: np.ndarray, head_terms: int,
-                    contracting: list[tuple[int, float]]) -> dict[str, Any]:
+def _channel_proofs(
+    c: np.ndarray,
+    A: np.ndarray,
+    B: np.ndarray,
+    nominal: np.ndarray,
+    head_terms: int,
+    contracting: list[tuple[int, float]],
+) -> dict[str, Any]:
     """Both proofs for one fault channel; ``bound`` is the smaller (either is a proof on its own)."""
-    out: dict[str, Any] = {"blocks": None, "paths": None, "ellipsoid": None, "rate": None, "depth": 0, "block": 0, "contraction": 1.0}
+    out: dict[str, Any] = {
+        "blocks": None,
+        "paths": None,
+        "ellipsoid": None,
+        "rate": None,
+        "depth": 0,
+        "block": 0,
+        "contraction": 1.0,
+    }
     if contracting:
-        head, tail, (out["block"], out["contraction"]) = _channel_bound(c, A, B, _lyapunov_factor(nominal),
-                                                                      head_terms, contracting)
+        head, tail, (out["block"], out["contraction"]) = _channel_bound(
+            c, A, B, _lyapunov_factor(nominal), head_terms, contracting
+        )
         out["blocks"] = head + tail
     norm = _common_norm(A, B, c)
     if norm is not None:
@@ -171,6 +199,7 @@ def _channel_proofs(c: np.ndarray, A: np.ndarray, B: np.ndarray, nominal: np.nda
     out["method"] = min(found, key=found.__getitem__) if found else None
     out["bound"] = found[out["method"]] if found else None
     return out
+
 
 def _lyapunov_factor(nominal: np.ndarray) -> np.ndarray:
     """``R`` with ``||x||_P = ||R x||`` for the nominal loop's Lyapunov matrix (``A' P A - P = -I``).
@@ -196,8 +225,9 @@ def _contracting_blocks(A: np.ndarray, R: np.ndarray, longest: int) -> list[tupl
     return out
 
 
-def _channel_bound(c: np.ndarray, A: np.ndarray, B: np.ndarray, R: np.ndarray, head_terms: int,
-                   contracting: list[tuple[int, float]]) -> tuple[float, float, tuple[int, float]]:
+def _channel_bound(
+    c: np.ndarray, A: np.ndarray, B: np.ndarray, R: np.ndarray, head_terms: int, contracting: list[tuple[int, float]]
+) -> tuple[float, float, tuple[int, float]]:
     """``(head, tail, (block, rho))`` per unit D for one fault channel ``c``: the head exactly, the best tail."""
     head = 0.0
     vectors = [B[:, col][None, :] for col in range(B.shape[1])]
@@ -207,8 +237,7 @@ def _channel_bound(c: np.ndarray, A: np.ndarray, B: np.ndarray, R: np.ndarray, h
     beta = sum(float(np.linalg.norm(v @ R.T, axis=1).max()) for v in vectors)
     best_tail, best_block = np.inf, (0, 1.0)
     for length, rho in contracting:
-        dual = sum(float(dual_norms(np.einsum("a,nab->nb", c, _vertex_products(A, r)), R).max())
-                   for r in range(length))
+        dual = sum(float(dual_norms(np.einsum("a,nab->nb", c, _vertex_products(A, r)), R).max()) for r in range(length))
         if beta * dual / (1.0 - rho) < best_tail:
             best_tail, best_block = beta * dual / (1.0 - rho), (length, rho)
     return head, best_tail, best_block
@@ -260,9 +289,15 @@ def _common_norm(A: np.ndarray, B: np.ndarray, c: np.ndarray) -> tuple[np.ndarra
     if hi >= 1.0:
         return None
     t = cp.Variable((1, 1))
-    shape = cp.Problem(cp.Minimize(t), [P >> 1e-6 * np.eye(N), cp.bmat([[t, c[None, :]], [c[:, None], P]]) >> 0,
-                                        cp.sum([cp.quad_form(B[:, k], P) for k in range(B.shape[1])]) <= 1.0,
-                                        *contract])
+    shape = cp.Problem(
+        cp.Minimize(t),
+        [
+            P >> 1e-6 * np.eye(N),
+            cp.bmat([[t, c[None, :]], [c[:, None], P]]) >> 0,
+            cp.sum([cp.quad_form(B[:, k], P) for k in range(B.shape[1])]) <= 1.0,
+            *contract,
+        ],
+    )
 
     def bound(norm: tuple[np.ndarray, float, float]) -> float:  # g(c) = gamma ||c||_*
         return norm[2] * float(dual_norms(c, norm[0])[0])
@@ -292,8 +327,9 @@ def _checked_norm(P: np.ndarray | None, A: np.ndarray, B: np.ndarray) -> tuple[n
     return R, rho, beta / (1.0 - rho)
 
 
-def _best_first_bound(A: np.ndarray, B: np.ndarray, c: np.ndarray, R: np.ndarray, gamma: float,
-                      budget: int = EXPANSIONS) -> tuple[float, int]:
+def _best_first_bound(
+    A: np.ndarray, B: np.ndarray, c: np.ndarray, R: np.ndarray, gamma: float, budget: int = EXPANSIONS
+) -> tuple[float, int]:
     """``(bound, depth)``: max of ``s + gamma ||r||_*`` over a frontier grown worst-node-first from the root c.
 
     Each node is a vertex path: its row r and the sum s of ``|r_j B|_1`` so far. The returned depth is the

@@ -78,8 +78,9 @@ def _points(plant: Plant, taus: np.ndarray, seed: int, mixed: int = 40) -> list[
     return points
 
 
-def _loops(plant: Plant, gains: Gains, points: list[np.ndarray],
-           steady: tuple[np.ndarray, np.ndarray]) -> list[LoopMatrices]:
+def _loops(
+    plant: Plant, gains: Gains, points: list[np.ndarray], steady: tuple[np.ndarray, np.ndarray]
+) -> list[LoopMatrices]:
     return [closed_loop(plant, gains, point, steady=steady) for point in points]
 
 
@@ -115,9 +116,15 @@ def _growth_rate(mats: list[np.ndarray], rng: np.random.Generator, steps: int = 
     return worst
 
 
-def _check_certificate(plant: Plant, gains: Gains, certificate: dict[str, np.ndarray], gamma_e: float | None,
-                       gamma_z: float | None, steady: tuple[np.ndarray, np.ndarray],
-                       points: list[np.ndarray]) -> tuple[bool | None, str]:
+def _check_certificate(
+    plant: Plant,
+    gains: Gains,
+    certificate: dict[str, np.ndarray],
+    gamma_e: float | None,
+    gamma_z: float | None,
+    steady: tuple[np.ndarray, np.ndarray],
+    points: list[np.ndarray],
+) -> tuple[bool | None, str]:
     """Re-check a polytopic certificate: containment of every point checked, then the BRL at every vertex."""
     if not {"P", "Q", "vertices"} <= set(certificate) or gamma_e is None or gamma_z is None:
         return None, "no polytopic certificate in the gains file"
@@ -127,26 +134,45 @@ def _check_certificate(plant: Plant, gains: Gains, certificate: dict[str, np.nda
         return False, "certificate matrices do not fit the real closed loop of this plant"
     for i, point in enumerate(points):
         k = len(vertices)
-        res = linprog(np.zeros(k), A_eq=np.vstack([vertices.T, np.ones((1, k))]), b_eq=np.append(point.ravel(), 1.0),
-                      bounds=[(0, None)] * k, method="highs")
+        res = linprog(
+            np.zeros(k),
+            A_eq=np.vstack([vertices.T, np.ones((1, k))]),
+            b_eq=np.append(point.ravel(), 1.0),
+            bounds=[(0, None)] * k,
+            method="highs",
+        )
         if res.status != 0:
-            return False, f"uncertain point {i} (of {len(points)}; the first are the constant delays) lies outside the certificate's polytope"
+            return (
+                False,
+                f"uncertain point {i} (of {len(points)}; the first are the constant delays) lies outside the certificate's polytope",
+            )
     if np.min(np.linalg.eigvalsh(P)) <= 0 or np.min(np.linalg.eigvalsh(Q)) <= 0:
         return False, "certificate matrices are not positive definite"
     for v in vertices:
         loop = closed_loop(plant, gains, v.reshape(-1, plant.m), steady=steady)
         for X, C, gamma in ((P, loop.C_ef, gamma_e), (Q, loop.C_y, gamma_z)):
             A, B = loop.A, loop.B
-            brl = np.block([[A.T @ X @ A - X + C.T @ C, A.T @ X @ B], [B.T @ X @ A, B.T @ X @ B - gamma**2 * np.eye(B.shape[1])]])
+            brl = np.block(
+                [[A.T @ X @ A - X + C.T @ C, A.T @ X @ B], [B.T @ X @ A, B.T @ X @ B - gamma**2 * np.eye(B.shape[1])]]
+            )
             top = float(np.max(np.linalg.eigvalsh(0.5 * (brl + brl.T))))
             if top >= 0.0:
                 return False, f"Bounded Real Lemma fails at a vertex (largest eigenvalue {top:.3g})"
-    return True, f"common P, Q valid at all {len(vertices)} vertices; polytope contains the {len(points)} points checked"
+    return (
+        True,
+        f"common P, Q valid at all {len(vertices)} vertices; polytope contains the {len(points)} points checked",
+    )
 
 
-def verify_gains(plant: Plant, gains: Gains, certificate: dict[str, np.ndarray] | None = None,
-                 gamma_e: float | None = None, gamma_z: float | None = None, grid_points: int = 201,
-                 seed: int = 0) -> Verdict:
+def verify_gains(
+    plant: Plant,
+    gains: Gains,
+    certificate: dict[str, np.ndarray] | None = None,
+    gamma_e: float | None = None,
+    gamma_z: float | None = None,
+    grid_points: int = 201,
+    seed: int = 0,
+) -> Verdict:
     """The verdict on ``gains`` for every delay in the plant's interval (see the module docstring)."""
     gains.check_shapes(plant)
     taus = tau_grid(plant, grid_points)

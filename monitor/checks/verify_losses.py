@@ -62,8 +62,14 @@ def _pattern_growth(matrices: list[np.ndarray], sequence: list[int]) -> float:
     return float(np.exp(log_growth / len(sequence)))
 
 
-def _divergence_search(plant: Plant, gains: Gains, steady: tuple[np.ndarray, np.ndarray], max_losses: int,
-                       rng: np.random.Generator, steps: int = 1200) -> tuple[float, str]:
+def _divergence_search(
+    plant: Plant,
+    gains: Gains,
+    steady: tuple[np.ndarray, np.ndarray],
+    max_losses: int,
+    rng: np.random.Generator,
+    steps: int = 1200,
+) -> tuple[float, str]:
     """The worst growth per sample over macro-steps on a delay grid and over long adversarial/random patterns."""
     taus = tau_grid(plant, 21)
     growth = macro_step_growth(plant, gains, [b0_of_tau(plant, float(t)) for t in taus], max_losses, steady)
@@ -77,12 +83,16 @@ def _divergence_search(plant: Plant, gains: Gains, steady: tuple[np.ndarray, np.
     S_i, C_i, ends = len(delivered), len(delivered) + 1, (0, len(delivered) - 1)
     patterns: dict[str, list[int]] = {}
     for n in range(1, max_losses + 1):
-        for name, run in (("lost samples", [S_i] * n), ("lost commands", [C_i] * n),
-                          ("mixed losses", [S_i if j % 2 else C_i for j in range(n)])):
+        for name, run in (
+            ("lost samples", [S_i] * n),
+            ("lost commands", [C_i] * n),
+            ("mixed losses", [S_i if j % 2 else C_i for j in range(n)]),
+        ):
             for end in ends:
                 patterns[f"bursts of {n} {name}, delivered at tau={taus[end]:.4f}"] = ([end] + run) * (steps // (n + 1))
-            patterns[f"bursts of {n} {name}, delivered at alternating ends"] = \
-                sum(([ends[b % 2]] + run for b in range(steps // (n + 1))), [])
+            patterns[f"bursts of {n} {name}, delivered at alternating ends"] = sum(
+                ([ends[b % 2]] + run for b in range(steps // (n + 1))), []
+            )
     for label in ("random delays", "random ends"):
         drawn: list[int] = []
         streak = 0
@@ -91,7 +101,9 @@ def _divergence_search(plant: Plant, gains: Gains, steady: tuple[np.ndarray, np.
                 drawn.append(S_i if rng.random() < 0.5 else C_i)
                 streak += 1
             else:
-                drawn.append(int(rng.integers(len(delivered))) if label == "random delays" else ends[int(rng.integers(2))])
+                drawn.append(
+                    int(rng.integers(len(delivered))) if label == "random delays" else ends[int(rng.integers(2))]
+                )
                 streak = 0
         patterns[f"random losses (<= {max_losses} in a row), {label}"] = drawn
     for name, pattern in patterns.items():
@@ -122,8 +134,9 @@ def _searched_norm(plant: Plant, gains: Gains, vertices: list[np.ndarray], max_l
     return loss_certificate(plant, gains, vertices, max_losses)
 
 
-def verify_losses(plant: Plant, gains: Gains, max_losses: int, certificate: dict[str, np.ndarray] | None = None,
-                  seed: int = 0) -> LossVerdict:
+def verify_losses(
+    plant: Plant, gains: Gains, max_losses: int, certificate: dict[str, np.ndarray] | None = None, seed: int = 0
+) -> LossVerdict:
     """The verdict described in the module docstring."""
     check_max_losses(max_losses)
     gains.check_shapes(plant)
@@ -139,10 +152,14 @@ def verify_losses(plant: Plant, gains: Gains, max_losses: int, certificate: dict
     candidates: list[tuple[str, Any]] = []  # (name, P or a function making it: found lazily, cheapest first)
     if certificate and "P_loss" in certificate and certificate["P_loss"].shape == steps[0].shape:
         candidates.append(("the certificate's P_loss", certificate["P_loss"]))
-    candidates += [("P of the averaged Lyapunov equation", lambda: _averaged_lyapunov(steps)),
-                   ("the identity", lambda: np.eye(steps[0].shape[0])),
-                   ("a P verify searched itself (LMI feasibility, re-checked here)",
-                    lambda: _searched_norm(plant, gains, vertices, max_losses))]
+    candidates += [
+        ("P of the averaged Lyapunov equation", lambda: _averaged_lyapunov(steps)),
+        ("the identity", lambda: np.eye(steps[0].shape[0])),
+        (
+            "a P verify searched itself (LMI feasibility, re-checked here)",
+            lambda: _searched_norm(plant, gains, vertices, max_losses),
+        ),
+    ]
     for depth in (1, 2):
         for name, make in candidates:
             P = make() if callable(make) else make
@@ -151,8 +168,16 @@ def verify_losses(plant: Plant, gains: Gains, max_losses: int, certificate: dict
             factor = contraction(P, steps, depth)
             if factor < 1.0:
                 what = "every macro-step" if depth == 1 else "every product of two macro-steps"
-                proof = (f"{what} at all {len(vertices)} polytope vertices contracts in the norm of {name} "
-                         f"(factor {factor:.4f} < 1)")
+                proof = (
+                    f"{what} at all {len(vertices)} polytope vertices contracts in the norm of {name} "
+                    f"(factor {factor:.4f} < 1)"
+                )
                 return LossVerdict(max_losses, True, growth, pattern, proof, factor)
-    return LossVerdict(max_losses, None, growth, pattern,
-                       "no divergent pattern found, but no norm proved contraction either: not proven", None)
+    return LossVerdict(
+        max_losses,
+        None,
+        growth,
+        pattern,
+        "no divergent pattern found, but no norm proved contraction either: not proven",
+        None,
+    )

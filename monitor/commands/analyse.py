@@ -11,25 +11,30 @@ __all__ = ["register"]
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "analyse", help="observe-only fault estimation over a flight log (.tlog, or DataFlash .bin/.log), offline",
+        "analyse",
+        help="observe-only fault estimation over a flight log (.tlog, or DataFlash .bin/.log), offline",
         description=(
             "Run the observer (eq. 5) over a flight's telemetry log as MAVProxy or QGroundControl write it "
             "(8-byte big-endian microsecond time + one MAVLink 1 or 2 frame per record), or over an ArduPilot "
             "on-board DataFlash log (.bin, or its text form .log; --signals names its messages, e.g. AOA.AOA, "
             "TimeUS is the clock), with u(k) read from the vehicle's actuator report: the same assembler and "
             "estimator as 'run --observe'. Prints the report of 'fault-monitor replay' and what the log holds; "
-            "--rrd also writes the recording in the same layout as 'run'."),
+            "--rrd also writes the recording in the same layout as 'run'."
+        ),
         epilog="Example: fault-monitor analyse flight.tlog --plant paper-continuous --gains gains.toml "
-               "--rrd flight.rrd --fault bias:2@20")
+        "--rrd flight.rrd --fault bias:2@20",
+    )
     p.add_argument("tlog", metavar="FLIGHT.tlog", help="the telemetry log (.tlog), or a DataFlash log (.bin, .log)")
     from monitor.commands.run import add_alarm_arguments, add_model_arguments
 
     add_model_arguments(p, fleet=False)
-    p.add_argument("--sysid", type=int, metavar="N", help="analyse only this system id (default: every vehicle "
-                   "in the log)")
+    p.add_argument(
+        "--sysid", type=int, metavar="N", help="analyse only this system id (default: every vehicle in the log)"
+    )
     p.add_argument("--rrd", metavar="FILE", help="also write the recording (same layout as 'run', RECORDING.md)")
-    p.add_argument("--fault", metavar="SPEC", help="the fault the flight had, to score settling and e_f "
-                   "(e.g. bias:2@20)")
+    p.add_argument(
+        "--fault", metavar="SPEC", help="the fault the flight had, to score settling and e_f (e.g. bias:2@20)"
+    )
     p.add_argument("--json", action="store_true", help="print the report as JSON (the shape of 'replay --json')")
     add_alarm_arguments(p)
     p.set_defaults(func=run)
@@ -59,10 +64,17 @@ def run(args: argparse.Namespace) -> int:
     fleet = load_models(args, layouts=dlog.layouts if dlog is not None else None)
     alarm = alarm_from_args(args, fleet)
     model = fleet.default
-    properties = {"monitor_version": __version__, "mode": "observe (analyse)", "source_log": str(args.tlog),
-                  "plant": model.plant.name, "plant_hash": model.plant.digest, "gains": str(args.gains),
-                  "gains_method": model.gains.method, "signals": model.signals.describe(),
-                  "alarm": f"threshold={alarm.threshold} clear={alarm.clear} samples={alarm.samples}"}
+    properties = {
+        "monitor_version": __version__,
+        "mode": "observe (analyse)",
+        "source_log": str(args.tlog),
+        "plant": model.plant.name,
+        "plant_hash": model.plant.digest,
+        "gains": str(args.gains),
+        "gains_method": model.gains.method,
+        "signals": model.signals.describe(),
+        "alarm": f"threshold={alarm.threshold} clear={alarm.clear} samples={alarm.samples}",
+    }
     if model.signals.operating_point is not None:  # y, x_hat, u, residual in the recording are deviations from it
         properties["operating_point"] = json.dumps(model.signals.operating_point)
     recorder = None
@@ -87,9 +99,12 @@ def run(args: argparse.Namespace) -> int:
         if dlog is not None:
             dlog.close()
     if result.extra.get("commands_in_log"):
-        print(f"analyse: note: the log holds {result.extra['commands_in_log']} SET_ACTUATOR_CONTROL_TARGET commands "
-              "(a monitor-controlled flight); analyse reads the actuator report as the vehicle's own u(k) "
-              "(observe-only), so its estimates are not those the live monitor computed", file=sys.stderr)
+        print(
+            f"analyse: note: the log holds {result.extra['commands_in_log']} SET_ACTUATOR_CONTROL_TARGET commands "
+            "(a monitor-controlled flight); analyse reads the actuator report as the vehicle's own u(k) "
+            "(observe-only), so its estimates are not those the live monitor computed",
+            file=sys.stderr,
+        )
     vehicles: dict[int, VehicleSeries] = {}
     for record in result.records:
         vehicles.setdefault(record.sysid, VehicleSeries(record.sysid)).samples.append(record)
@@ -98,24 +113,37 @@ def run(args: argparse.Namespace) -> int:
         from monitor.link.log_inventory import why_no_samples
 
         sig = model.signals
-        raise UserError(f"{args.tlog}: no sample could be assembled from {result.log_records} log records "
-                        f"({inventory.describe()}); "
-                        + why_no_samples(inventory, sig, (*sig.outputs, *sig.actuator), args.sysid, model.plant.h))
-    recording = Recording(path=Path(args.rrd or args.tlog), application_id="fault-monitor analyse",
-                          properties={**properties, "fault_monitor_version": __version__}, vehicles=vehicles,
-                          has_footer=True)
+        raise UserError(
+            f"{args.tlog}: no sample could be assembled from {result.log_records} log records "
+            f"({inventory.describe()}); "
+            + why_no_samples(inventory, sig, (*sig.outputs, *sig.actuator), args.sysid, model.plant.h)
+        )
+    recording = Recording(
+        path=Path(args.rrd or args.tlog),
+        application_id="fault-monitor analyse",
+        properties={**properties, "fault_monitor_version": __version__},
+        vehicles=vehicles,
+        has_footer=True,
+    )
     report = score_recording(recording, sysid=args.sysid, fault_spec=args.fault)
-    report["log"] = {"records": result.log_records, "skipped_bytes": result.skipped_bytes,
-                     "truncated": result.truncated, "seconds": round(result.seconds, 3), **result.counts,
-                     "inventory": inventory.as_dict()}
+    report["log"] = {
+        "records": result.log_records,
+        "skipped_bytes": result.skipped_bytes,
+        "truncated": result.truncated,
+        "seconds": round(result.seconds, 3),
+        **result.counts,
+        "inventory": inventory.as_dict(),
+    }
     if args.json:
         print(json.dumps(report))
     else:
         print(format_report(report))
         c = result.counts
-        print(f"log: {result.log_records} records in {result.seconds:.2f} s; {c['processed']} samples, "
-              f"{c['incomplete']} incomplete, {c['garbage']} garbage, {result.skipped_bytes} bytes skipped"
-              + (", truncated at the end" if result.truncated else ""))
+        print(
+            f"log: {result.log_records} records in {result.seconds:.2f} s; {c['processed']} samples, "
+            f"{c['incomplete']} incomplete, {c['garbage']} garbage, {result.skipped_bytes} bytes skipped"
+            + (", truncated at the end" if result.truncated else "")
+        )
         for line in inventory.lines():
             print(f"log holds: {line}")
     return 0

@@ -28,38 +28,85 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--out", metavar="DIR", help="output directory (default: demo-out; demo-aircraft with --aircraft)")
-    parser.add_argument("--plant", metavar="P", help="continuous plant (default: paper-continuous; with --aircraft "
-                        "the plants are identified from the aircraft's flight)")
-    parser.add_argument("--steps", type=int, metavar="N",
-                        help="samples per run (default: 100; with --aircraft 45 s of flight at --rate)")
-    parser.add_argument("--speedup", type=float, metavar="S", help="simulated seconds per wall second (default: 10; with "
-                        "--aircraft 3, so that the monitor's few ms per sample stay inside the delay interval at h = 0.05 s)")
-    parser.add_argument("--fault", metavar="SPEC", help="fault SPEC (default: bias:2@20; with --aircraft a 2 deg "
-                        "elevator bias 5 s into the flight, e.g. bias:2@100 at 20 Hz)")
-    parser.add_argument("--delay", metavar="SPEC", help="delay SPEC (default: uniform:0:0.46; with --aircraft "
-                        "uniform over [0, 0.46 h])")
+    parser.add_argument(
+        "--out", metavar="DIR", help="output directory (default: demo-out; demo-aircraft with --aircraft)"
+    )
+    parser.add_argument(
+        "--plant",
+        metavar="P",
+        help="continuous plant (default: paper-continuous; with --aircraft "
+        "the plants are identified from the aircraft's flight)",
+    )
+    parser.add_argument(
+        "--steps",
+        type=int,
+        metavar="N",
+        help="samples per run (default: 100; with --aircraft 45 s of flight at --rate)",
+    )
+    parser.add_argument(
+        "--speedup",
+        type=float,
+        metavar="S",
+        help="simulated seconds per wall second (default: 10; with "
+        "--aircraft 3, so that the monitor's few ms per sample stay inside the delay interval at h = 0.05 s)",
+    )
+    parser.add_argument(
+        "--fault",
+        metavar="SPEC",
+        help="fault SPEC (default: bias:2@20; with --aircraft a 2 deg "
+        "elevator bias 5 s into the flight, e.g. bias:2@100 at 20 Hz)",
+    )
+    parser.add_argument(
+        "--delay", metavar="SPEC", help="delay SPEC (default: uniform:0:0.46; with --aircraft uniform over [0, 0.46 h])"
+    )
     parser.add_argument("--wind", metavar="SPEC", help="wind SPEC of the linear plant (default: paper)")
     parser.add_argument("--seed", type=int, default=0, help="seed shared by every design's run (default: 0)")
-    parser.add_argument("--methods", default=",".join(METHODS), metavar="LIST",
-                        help=f"designs to compare, comma-separated (default: {','.join(METHODS)})")
-    parser.add_argument("--runs", type=int, metavar="N", help="instead of the live run: Monte-Carlo over N delay seeds, simulation only (no "
-                        "daemons), results in DIR/montecarlo.json (the linear plant only)")
-    parser.add_argument("--redesign", action="store_true", help="design again even when DIR/gains/ holds current gains "
-                        "(with --aircraft: fly the identification flight again too)")
+    parser.add_argument(
+        "--methods",
+        default=",".join(METHODS),
+        metavar="LIST",
+        help=f"designs to compare, comma-separated (default: {','.join(METHODS)})",
+    )
+    parser.add_argument(
+        "--runs",
+        type=int,
+        metavar="N",
+        help="instead of the live run: Monte-Carlo over N delay seeds, simulation only (no "
+        "daemons), results in DIR/montecarlo.json (the linear plant only)",
+    )
+    parser.add_argument(
+        "--redesign",
+        action="store_true",
+        help="design again even when DIR/gains/ holds current gains "
+        "(with --aircraft: fly the identification flight again too)",
+    )
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     a = parser.add_argument_group("aircraft (JSBSim): identify the aircraft from a flight, then compare on it")
     a.add_argument("--aircraft", metavar="NAME", help="fly a JSBSim aircraft (e.g. c172p) instead of the paper's plant")
-    a.add_argument("--aircraft-dir", metavar="DIR", help="where NAME is, for your own aircraft (see sim-vehicle run --help)")
+    a.add_argument(
+        "--aircraft-dir", metavar="DIR", help="where NAME is, for your own aircraft (see sim-vehicle run --help)"
+    )
     a.add_argument("--airspeed", type=float, default=100.0, metavar="KT", help="trim airspeed (default: 100)")
     a.add_argument("--altitude", type=float, default=3000.0, metavar="FT", help="trim altitude (default: 3000)")
     a.add_argument("--rate", type=float, default=20.0, metavar="HZ", help="sample rate, h = 1/HZ (default: 20)")
-    a.add_argument("--turbulence", default="none", choices=TURBULENCE_LEVELS,
-                   help="JSBSim's turbulence in the live runs (default: none; the identification flight is calm)")
-    a.add_argument("--excite", default="prbs:1:60", metavar="SPEC",
-                   help="the identification manoeuvre (default: prbs:1:60, +-1 deg for 60 s)")
-    a.add_argument("--models", default="short-period,longitudinal", metavar="LIST",
-                   help="identified models to compare (default: short-period,longitudinal)")
+    a.add_argument(
+        "--turbulence",
+        default="none",
+        choices=TURBULENCE_LEVELS,
+        help="JSBSim's turbulence in the live runs (default: none; the identification flight is calm)",
+    )
+    a.add_argument(
+        "--excite",
+        default="prbs:1:60",
+        metavar="SPEC",
+        help="the identification manoeuvre (default: prbs:1:60, +-1 deg for 60 s)",
+    )
+    a.add_argument(
+        "--models",
+        default="short-period,longitudinal",
+        metavar="LIST",
+        help="identified models to compare (default: short-period,longitudinal)",
+    )
     parser.set_defaults(func=run)
 
 
@@ -77,7 +124,11 @@ def run(args: argparse.Namespace) -> int:
     from monitor.errors import UserError
 
     methods = _methods(args.methods)
-    if (args.steps is not None and args.steps < 2) or not (args.speedup is None or args.speedup > 0) or (args.runs is not None and args.runs < 1):
+    if (
+        (args.steps is not None and args.steps < 2)
+        or not (args.speedup is None or args.speedup > 0)
+        or (args.runs is not None and args.runs < 1)
+    ):
         raise UserError("--steps must be >= 2, --speedup > 0 and --runs >= 1")
     if args.aircraft:
         return _run_aircraft(args, methods)
@@ -86,11 +137,23 @@ def run(args: argparse.Namespace) -> int:
     from monitor.demo.live import Scenario
     from monitor.demo.orchestrate import DemoOptions, run_demo
 
-    scenario = Scenario(plant=args.plant or "paper-continuous", steps=args.steps or 100, speedup=args.speedup or 10.0,
-                        fault=args.fault or "bias:2@20", delay=args.delay or "uniform:0:0.46",
-                        wind=args.wind or "paper", seed=args.seed)
-    options = DemoOptions(scenario=scenario, out=args.out or "demo-out", methods=methods, runs=args.runs,
-                          redesign=args.redesign, figures=not args.no_figures)
+    scenario = Scenario(
+        plant=args.plant or "paper-continuous",
+        steps=args.steps or 100,
+        speedup=args.speedup or 10.0,
+        fault=args.fault or "bias:2@20",
+        delay=args.delay or "uniform:0:0.46",
+        wind=args.wind or "paper",
+        seed=args.seed,
+    )
+    options = DemoOptions(
+        scenario=scenario,
+        out=args.out or "demo-out",
+        methods=methods,
+        runs=args.runs,
+        redesign=args.redesign,
+        figures=not args.no_figures,
+    )
     return run_demo(options)
 
 
@@ -104,8 +167,10 @@ def _run_aircraft(args: argparse.Namespace, methods: tuple[str, ...]) -> int:
 
     for flag, value in (("--plant", args.plant), ("--wind", args.wind), ("--runs", args.runs)):
         if value is not None:
-            raise UserError(f"{flag} does not apply with --aircraft (the plants are identified from the aircraft's "
-                            "own flight, its air is --turbulence, and the Monte-Carlo is the linear plant's)")
+            raise UserError(
+                f"{flag} does not apply with --aircraft (the plants are identified from the aircraft's "
+                "own flight, its air is --turbulence, and the Monte-Carlo is the linear plant's)"
+            )
     if not (math.isfinite(args.rate) and 1.0 <= args.rate <= 200.0):
         raise UserError(f"--rate must be 1-200 Hz, got {args.rate:g}")
     models = tuple(m.strip() for m in args.models.split(",") if m.strip())
@@ -113,12 +178,30 @@ def _run_aircraft(args: argparse.Namespace, methods: tuple[str, ...]) -> int:
         raise UserError(f"--models: choose from {', '.join(MODELS)}")
     h = 1.0 / args.rate
     onset = round(5.0 * args.rate)
-    aircraft = Aircraft(name=args.aircraft, airspeed=args.airspeed, altitude=args.altitude, rate=args.rate,
-                        turbulence=args.turbulence, aircraft_dir=args.aircraft_dir)
-    scenario = Scenario(plant="", steps=args.steps or round(45.0 * args.rate), speedup=args.speedup or 3.0,
-                        fault=args.fault or f"bias:2@{onset}", delay=args.delay or f"uniform:0:{round(0.46 * h, 6):g}",
-                        seed=args.seed, aircraft=aircraft)
-    options = AircraftDemoOptions(scenario=scenario, excite=args.excite, out=args.out or "demo-aircraft",
-                                  methods=methods, models=models, redesign=args.redesign,
-                                  figures=not args.no_figures)
+    aircraft = Aircraft(
+        name=args.aircraft,
+        airspeed=args.airspeed,
+        altitude=args.altitude,
+        rate=args.rate,
+        turbulence=args.turbulence,
+        aircraft_dir=args.aircraft_dir,
+    )
+    scenario = Scenario(
+        plant="",
+        steps=args.steps or round(45.0 * args.rate),
+        speedup=args.speedup or 3.0,
+        fault=args.fault or f"bias:2@{onset}",
+        delay=args.delay or f"uniform:0:{round(0.46 * h, 6):g}",
+        seed=args.seed,
+        aircraft=aircraft,
+    )
+    options = AircraftDemoOptions(
+        scenario=scenario,
+        excite=args.excite,
+        out=args.out or "demo-aircraft",
+        methods=methods,
+        models=models,
+        redesign=args.redesign,
+        figures=not args.no_figures,
+    )
     return run_aircraft_demo(options)

@@ -27,31 +27,62 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--plant", required=True, metavar="P", help="preset (paper, paper-continuous) or plant TOML file")
+    parser.add_argument(
+        "--plant", required=True, metavar="P", help="preset (paper, paper-continuous) or plant TOML file"
+    )
     parser.add_argument("--method", choices=METHODS, default="certified", help="design method (default: certified)")
-    parser.add_argument("--objective", choices=OBJECTIVES, default=None,
-                        help="certified method only: fast (the default) or hinf (the joint H-infinity design)")
-    parser.add_argument("--mismatch", type=float, default=None, metavar="E",
-                        help="fast objective: energy of e_f a unit step fault may leave after the two deadbeat samples "
-                             "at the interval's ends (default: 0.01; larger trades settling for output regulation)")
-    parser.add_argument("--fault-time-constant", type=float, default=None, metavar="S",
-                        help="report f_hat low-passed with this time constant in seconds, for the alarm and every "
-                             "user of the estimate (the loop keeps the raw estimate); 0: report it raw (default: "
-                             "1 s in turbulence, see --turbulence; 0 in calm air)")
-    parser.add_argument("--turbulence", choices=TURBULENCE_LEVELS, default=None,
-                        help="the air the loop will fly in: in turbulence the reported f_hat is low-passed over 1 s "
-                             "(no false alarms from gusts, detection about 1 s later); default: the level the plant's "
-                             "[disturbance] table names, else none")
-    parser.add_argument("--max-losses", type=int, default=0, metavar="N",
-                        help="also certify stability through up to N consecutive lost samples or lost/late commands "
-                             "(any mix, any delays in the interval); the design fails if no certificate exists "
-                             "(default: 0, losses not certified)")
+    parser.add_argument(
+        "--objective",
+        choices=OBJECTIVES,
+        default=None,
+        help="certified method only: fast (the default) or hinf (the joint H-infinity design)",
+    )
+    parser.add_argument(
+        "--mismatch",
+        type=float,
+        default=None,
+        metavar="E",
+        help="fast objective: energy of e_f a unit step fault may leave after the two deadbeat samples "
+        "at the interval's ends (default: 0.01; larger trades settling for output regulation)",
+    )
+    parser.add_argument(
+        "--fault-time-constant",
+        type=float,
+        default=None,
+        metavar="S",
+        help="report f_hat low-passed with this time constant in seconds, for the alarm and every "
+        "user of the estimate (the loop keeps the raw estimate); 0: report it raw (default: "
+        "1 s in turbulence, see --turbulence; 0 in calm air)",
+    )
+    parser.add_argument(
+        "--turbulence",
+        choices=TURBULENCE_LEVELS,
+        default=None,
+        help="the air the loop will fly in: in turbulence the reported f_hat is low-passed over 1 s "
+        "(no false alarms from gusts, detection about 1 s later); default: the level the plant's "
+        "[disturbance] table names, else none",
+    )
+    parser.add_argument(
+        "--max-losses",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also certify stability through up to N consecutive lost samples or lost/late commands "
+        "(any mix, any delays in the interval); the design fails if no certificate exists "
+        "(default: 0, losses not certified)",
+    )
     parser.add_argument("--out", required=True, metavar="GAINS.toml", help="gains file to write (only on success)")
-    parser.add_argument("--weight-y", type=float, default=0.1, metavar="W",
-                        help="weight of gamma_z^2 (output bound) next to gamma_e^2 in the objective (default: 0.1)")
+    parser.add_argument(
+        "--weight-y",
+        type=float,
+        default=0.1,
+        metavar="W",
+        help="weight of gamma_z^2 (output bound) next to gamma_e^2 in the objective (default: 0.1)",
+    )
     parser.add_argument("--quiet", action="store_true", help="print nothing but errors")
-    parser.add_argument("--verbose", action="store_true",
-                        help="also print every candidate the search evaluates, on stderr")
+    parser.add_argument(
+        "--verbose", action="store_true", help="also print every candidate the search evaluates, on stderr"
+    )
     parser.set_defaults(func=run)
 
 
@@ -83,9 +114,13 @@ def run(args: argparse.Namespace) -> int:
         options["turbulence"] = args.turbulence
     plant = load_plant(args.plant)
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
-    say(f"designing ({args.method}) for plant '{plant.name}' ({plant.source}), tau in [{plant.tau_min}, {plant.tau_max}] s ...")
+    say(
+        f"designing ({args.method}) for plant '{plant.name}' ({plant.source}), tau in [{plant.tau_min}, {plant.tau_max}] s ..."
+    )
     if args.method == "certified" and args.verbose and not args.quiet:
-        options["progress"] = lambda i, g: say(f"  candidate {i:3d}: " + (f"gamma_e = {g:.4f}" if g else "no certificate"))
+        options["progress"] = lambda i, g: say(
+            f"  candidate {i:3d}: " + (f"gamma_e = {g:.4f}" if g else "no certificate")
+        )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # cvxpy's "may be inaccurate" warnings: inaccurate solves are refused anyway
         result = run_design(args.method, plant, **options)
@@ -96,14 +131,18 @@ def run(args: argparse.Namespace) -> int:
         for name in ("L", "M", "K1", "K2", "K3"):
             print(f"{name:<10} {getattr(g, name).ravel().round(6).tolist()}")
         print(f"gamma_e    {result.gamma_e:.4f}   gamma_z {result.gamma_z:.4f}   ({result.bounds_apply_to})")
-        print(f"solver     {result.solver_path}; build {result.build_seconds:.3f} s, "
-              f"solve {result.solve_seconds:.3f} s, total {result.total_seconds:.3f} s")
+        print(
+            f"solver     {result.solver_path}; build {result.build_seconds:.3f} s, "
+            f"solve {result.solve_seconds:.3f} s, total {result.total_seconds:.3f} s"
+        )
         if plant.lags is not None:
             lags = plant.lags
-            print(f"delay      past one sample: tau in [{plant.tau_min:g}, {plant.tau_max:g}] s is {lags.first} to "
-                  f"{lags.last} whole samples of h = {plant.h:g} s; the commands in flight (u(k-2) to "
-                  f"u(k-{lags.last + 1})) are in the loop's state. Used: one polytope per whole-sample part, "
-                  "and every combination of their vertices.")
+            print(
+                f"delay      past one sample: tau in [{plant.tau_min:g}, {plant.tau_max:g}] s is {lags.first} to "
+                f"{lags.last} whole samples of h = {plant.h:g} s; the commands in flight (u(k-2) to "
+                f"u(k-{lags.last + 1})) are in the loop's state. Used: one polytope per whole-sample part, "
+                "and every combination of their vertices."
+            )
         else:
             _print_deltas(plant, result.method)
         for note in result.notes:
@@ -117,9 +156,16 @@ def _print_deltas(plant, method: str) -> None:
     from monitor.model.delay_model import delta_summary
 
     deltas = delta_summary(plant)
-    print(f"delta      Lemma 1 as printed {deltas['delta_lemma1']:.4f}; exact max |F(tau)| {deltas['delta_exact']:.4f}; "
-          f"plant file {deltas['delta_file'] or '-'} (tau_bar {deltas['tau_bar']:.4f} s). "
-          + ("Used: the exact B0(tau) curve, in a polytope." if method == "certified" else
-             "Used: none (nominal delay)." if method == "separate" else
-             "Used: the polytope, for each part alone." if method == "robust-separate" else
-             "Used: none; Theorem 1 treats d_tau as an outside input."))
+    print(
+        f"delta      Lemma 1 as printed {deltas['delta_lemma1']:.4f}; exact max |F(tau)| {deltas['delta_exact']:.4f}; "
+        f"plant file {deltas['delta_file'] or '-'} (tau_bar {deltas['tau_bar']:.4f} s). "
+        + (
+            "Used: the exact B0(tau) curve, in a polytope."
+            if method == "certified"
+            else "Used: none (nominal delay)."
+            if method == "separate"
+            else "Used: the polytope, for each part alone."
+            if method == "robust-separate"
+            else "Used: none; Theorem 1 treats d_tau as an outside input."
+        )
+    )

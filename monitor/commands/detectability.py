@@ -38,33 +38,77 @@ Then:    fault-monitor run ... --alarm-threshold auto --turbulence moderate"""
 def register(sub: argparse._SubParsersAction) -> None:
     from monitor.checks import FALSE_ALARMS_PER_HOUR, PROBABILITY, WITHIN_S
 
-    p = sub.add_parser("detectability", help="the smallest elevator bias detected within T s at a false-alarm budget",
-                       description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "detectability",
+        help="the smallest elevator bias detected within T s at a false-alarm budget",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--plant", required=True, metavar="P", help="preset (paper, paper-continuous) or plant TOML file")
     p.add_argument("--gains", required=True, metavar="GAINS.toml", help="gains file (from fault-monitor design)")
     air = p.add_mutually_exclusive_group(required=True)
-    air.add_argument("--turbulence", choices=TURBULENCE_LEVELS[1:], metavar="LEVEL",
-                     help="light, moderate or severe (needs the plant's [disturbance] table)")
+    air.add_argument(
+        "--turbulence",
+        choices=TURBULENCE_LEVELS[1:],
+        metavar="LEVEL",
+        help="light, moderate or severe (needs the plant's [disturbance] table)",
+    )
     air.add_argument("--disturbance-bound", type=float, metavar="D", help="the largest |d(k)|, plant units")
-    p.add_argument("--false-alarms-per-hour", type=float, default=FALSE_ALARMS_PER_HOUR, metavar="N",
-                   help=f"with --turbulence: the false-alarm budget (default: {FALSE_ALARMS_PER_HOUR:g})")
-    p.add_argument("--within", type=float, default=WITHIN_S, metavar="T",
-                   help=f"detected within T seconds of the onset (default: {WITHIN_S:g})")
-    p.add_argument("--probability", type=float, default=PROBABILITY, metavar="P",
-                   help=f"with --turbulence: detected with at least this probability (default: {PROBABILITY:g})")
-    p.add_argument("--alarm-samples", type=int, default=2, metavar="S",
-                   help="the alarm's persistence, as run's --alarm-samples (default: 2)")
-    p.add_argument("--altitude", type=float, default=3000.0, metavar="FT",
-                   help="feet above ground: where the turbulence intensities are compared, and the Monte Carlo's "
-                        "altitude (default: 3000)")
+    p.add_argument(
+        "--false-alarms-per-hour",
+        type=float,
+        default=FALSE_ALARMS_PER_HOUR,
+        metavar="N",
+        help=f"with --turbulence: the false-alarm budget (default: {FALSE_ALARMS_PER_HOUR:g})",
+    )
+    p.add_argument(
+        "--within",
+        type=float,
+        default=WITHIN_S,
+        metavar="T",
+        help=f"detected within T seconds of the onset (default: {WITHIN_S:g})",
+    )
+    p.add_argument(
+        "--probability",
+        type=float,
+        default=PROBABILITY,
+        metavar="P",
+        help=f"with --turbulence: detected with at least this probability (default: {PROBABILITY:g})",
+    )
+    p.add_argument(
+        "--alarm-samples",
+        type=int,
+        default=2,
+        metavar="S",
+        help="the alarm's persistence, as run's --alarm-samples (default: 2)",
+    )
+    p.add_argument(
+        "--altitude",
+        type=float,
+        default=3000.0,
+        metavar="FT",
+        help="feet above ground: where the turbulence intensities are compared, and the Monte Carlo's "
+        "altitude (default: 3000)",
+    )
     mc = p.add_argument_group("Monte Carlo (with --turbulence)")
-    mc.add_argument("--monte-carlo", type=int, default=0, metavar="N", help="fly N seeded JSBSim flights (seeds "
-                    "--seed .. --seed + N - 1)")
+    mc.add_argument(
+        "--monte-carlo",
+        type=int,
+        default=0,
+        metavar="N",
+        help="fly N seeded JSBSim flights (seeds --seed .. --seed + N - 1)",
+    )
     mc.add_argument("--aircraft", metavar="NAME", help="the JSBSim aircraft the plant models (e.g. c172p)")
     mc.add_argument("--aircraft-dir", metavar="DIR", help="where the aircraft is, if not one JSBSim ships")
     mc.add_argument("--airspeed", type=float, default=100.0, metavar="KT", help="trim airspeed, knots (default: 100)")
-    mc.add_argument("--minutes", type=float, default=6.0, metavar="M",
-                    help="pre-fault flight per seed, where false alarms are counted (default: 6)")
+    mc.add_argument(
+        "--minutes",
+        type=float,
+        default=6.0,
+        metavar="M",
+        help="pre-fault flight per seed, where false alarms are counted (default: 6)",
+    )
     mc.add_argument("--seed", type=int, default=0, help="first seed (default: 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the text report")
     p.set_defaults(func=run)
@@ -95,26 +139,46 @@ def run(args: argparse.Namespace) -> int:
     _check(args)
     model = load_model(args.plant, args.gains, force=False)
     plant = model.plant
-    result = detectability(plant, model.gains.gains, disturbance_bound=args.disturbance_bound,
-                           turbulence=args.turbulence, altitude_ft=args.altitude,
-                           false_alarms_per_hour=args.false_alarms_per_hour, within_s=args.within,
-                           alarm_samples=args.alarm_samples, probability=args.probability,
-                           report_time_constant=getattr(model.gains, "fault_time_constant", None))
+    result = detectability(
+        plant,
+        model.gains.gains,
+        disturbance_bound=args.disturbance_bound,
+        turbulence=args.turbulence,
+        altitude_ft=args.altitude,
+        false_alarms_per_hour=args.false_alarms_per_hour,
+        within_s=args.within,
+        alarm_samples=args.alarm_samples,
+        probability=args.probability,
+        report_time_constant=getattr(model.gains, "fault_time_constant", None),
+    )
     mc = None
     if args.monte_carlo:
         from monitor.jsbsim_flights import FlightPlan, monte_carlo  # the in-process JSBSim flights (optional)
 
-        plan = FlightPlan(args.aircraft, airspeed_kt=args.airspeed, altitude_ft=args.altitude,
-                          aircraft_dir=args.aircraft_dir, minutes=args.minutes, seed=args.seed)
-        mc = monte_carlo(model, result, args.monte_carlo, plan,
-                         progress=lambda line: print(f"monte carlo  {line}", file=sys.stderr, flush=True))
+        plan = FlightPlan(
+            args.aircraft,
+            airspeed_kt=args.airspeed,
+            altitude_ft=args.altitude,
+            aircraft_dir=args.aircraft_dir,
+            minutes=args.minutes,
+            seed=args.seed,
+        )
+        mc = monte_carlo(
+            model,
+            result,
+            args.monte_carlo,
+            plan,
+            progress=lambda line: print(f"monte carlo  {line}", file=sys.stderr, flush=True),
+        )
     if args.json:
         out = {**result.as_dict(), "plant": plant.source, "gains": str(args.gains), "unit": plant.unit}
         if mc is not None:
-            out["monte_carlo"] = {**mc.as_dict(), "ratio_false_alarms": _ratio(mc.false_alarms_per_hour,
-                                                                              mc.predicted_per_hour),
-                                  "ratio_bias": _ratio(mc.smallest_bias_95, result.bias),
-                                  "ratio_fhat_std": _ratio(mc.fhat_std, result.fhat_std)}
+            out["monte_carlo"] = {
+                **mc.as_dict(),
+                "ratio_false_alarms": _ratio(mc.false_alarms_per_hour, mc.predicted_per_hour),
+                "ratio_bias": _ratio(mc.smallest_bias_95, result.bias),
+                "ratio_fhat_std": _ratio(mc.fhat_std, result.fhat_std),
+            }
         print(json.dumps(finite_or_none(out), allow_nan=False))
         return 0
     _print(plant, result, mc, args)
@@ -130,48 +194,75 @@ def _print(plant, r, mc, args) -> None:
     T = f"{r.within_s:g} s"
     if r.mode == "bounded":
         print(f"air            |d| <= {r.disturbance_bound:g} {u} (bounded)")
-        print(f"no fault       |f_hat| <= {r.noise_bound:.4g} {u}, proven for every delay sequence in "
-              f"[{plant.tau_min:g}, {plant.tau_max:g}] s ({r.noise_bound_method})")
-        print(f"threshold      {r.threshold:.4g} {u} (1.25 x the bound, as run --alarm-threshold auto "
-              f"--disturbance-bound {r.disturbance_bound:g}): no false alarm, ever")
-        print(f"detectable     a bias of {r.bias:.4g} {u} or more is surely detected within {T} "
-              f"(alarm by {r.detected_at_s:.2f} s after onset; f_hat has reached {r.step_at:.3f} of the bias)")
+        print(
+            f"no fault       |f_hat| <= {r.noise_bound:.4g} {u}, proven for every delay sequence in "
+            f"[{plant.tau_min:g}, {plant.tau_max:g}] s ({r.noise_bound_method})"
+        )
+        print(
+            f"threshold      {r.threshold:.4g} {u} (1.25 x the bound, as run --alarm-threshold auto "
+            f"--disturbance-bound {r.disturbance_bound:g}): no false alarm, ever"
+        )
+        print(
+            f"detectable     a bias of {r.bias:.4g} {u} or more is surely detected within {T} "
+            f"(alarm by {r.detected_at_s:.2f} s after onset; f_hat has reached {r.step_at:.3f} of the bias)"
+        )
     else:
-        print(f"air            {r.turbulence} turbulence at {r.altitude_ft:g} ft: d has std {r.sigma_d:.4g} {u}, "
-              f"time constant {r.time_constant:.3g} s ([disturbance] x {r.sigma_ratio:.3f}, the ratio of JSBSim's "
-              f"MIL-F-8785C intensities to the level it was measured in, {plant.disturbance.turbulence})")
-        print(f"no fault       f_hat std {r.fhat_std:.4g} {u}, lag-one correlation {r.fhat_rho:.4f} (linear loop, "
-              f"worst constant delay {r.tau_worst:.4g} s)")
-        print(f"threshold      {r.threshold:.4g} {u} = {r.threshold / r.fhat_std:.2f} std: "
-              f"{r.false_alarms_per_hour:g} false alarm(s) per hour (Rice; an upper bound of raises)")
-        print(f"detectable     a bias of {r.bias:.4g} {u} or more is detected within {T} with probability "
-              f"{r.probability:g} (the linear loop in 4000 seeded draws of that air; median alarm "
-              f"{r.detected_at_s:.2f} s after onset)")
+        print(
+            f"air            {r.turbulence} turbulence at {r.altitude_ft:g} ft: d has std {r.sigma_d:.4g} {u}, "
+            f"time constant {r.time_constant:.3g} s ([disturbance] x {r.sigma_ratio:.3f}, the ratio of JSBSim's "
+            f"MIL-F-8785C intensities to the level it was measured in, {plant.disturbance.turbulence})"
+        )
+        print(
+            f"no fault       f_hat std {r.fhat_std:.4g} {u}, lag-one correlation {r.fhat_rho:.4f} (linear loop, "
+            f"worst constant delay {r.tau_worst:.4g} s)"
+        )
+        print(
+            f"threshold      {r.threshold:.4g} {u} = {r.threshold / r.fhat_std:.2f} std: "
+            f"{r.false_alarms_per_hour:g} false alarm(s) per hour (Rice; an upper bound of raises)"
+        )
+        print(
+            f"detectable     a bias of {r.bias:.4g} {u} or more is detected within {T} with probability "
+            f"{r.probability:g} (the linear loop in 4000 seeded draws of that air; median alarm "
+            f"{r.detected_at_s:.2f} s after onset)"
+        )
     print(f"delays         {r.delays}")
-    flag = (f"--turbulence {r.turbulence}" if r.mode == "turbulence"
-            else f"--disturbance-bound {r.disturbance_bound:g}")
+    flag = f"--turbulence {r.turbulence}" if r.mode == "turbulence" else f"--disturbance-bound {r.disturbance_bound:g}"
     print(f"alarm          fault-monitor run ... --alarm-threshold auto {flag} --alarm-samples {r.alarm_samples}")
     if mc is None:
         return
-    print(f"monte carlo    {mc.flights} JSBSim {mc.aircraft} flights in {mc.turbulence} turbulence, "
-          f"{mc.hours:.2f} h before onset ({mc.seconds:.0f} s)")
+    print(
+        f"monte carlo    {mc.flights} JSBSim {mc.aircraft} flights in {mc.turbulence} turbulence, "
+        f"{mc.hours:.2f} h before onset ({mc.seconds:.0f} s)"
+    )
     if mc.disturbance:
-        print(f"  d measured   std {mc.disturbance['sigma']:.4g} {u} (table {r.sigma_d:.4g}), lag-one time constant "
-              f"{mc.disturbance['time_constant']:.3g} s as identify fits it (table {r.time_constant:.3g} s)")
-    print(f"  f_hat std    {mc.fhat_std:.4g} {u} observed, {r.fhat_std:.4g} predicted: ratio "
-          f"{_fmt(_ratio(mc.fhat_std, r.fhat_std))}")
+        print(
+            f"  d measured   std {mc.disturbance['sigma']:.4g} {u} (table {r.sigma_d:.4g}), lag-one time constant "
+            f"{mc.disturbance['time_constant']:.3g} s as identify fits it (table {r.time_constant:.3g} s)"
+        )
+    print(
+        f"  f_hat std    {mc.fhat_std:.4g} {u} observed, {r.fhat_std:.4g} predicted: ratio "
+        f"{_fmt(_ratio(mc.fhat_std, r.fhat_std))}"
+    )
     for row in mc.crossings:
-        print(f"  crossings    of +-{row['level']:.3g} {u}: {row['observed_per_hour']:.3g} per hour observed, "
-              f"{row['predicted_per_hour']:.3g} predicted")
-    print(f"  false alarms {mc.false_alarms} in {mc.hours:.2f} h = {mc.false_alarms_per_hour:.3g} per hour observed, "
-          f"at most {mc.predicted_per_hour:.3g} predicted")
+        print(
+            f"  crossings    of +-{row['level']:.3g} {u}: {row['observed_per_hour']:.3g} per hour observed, "
+            f"{row['predicted_per_hour']:.3g} predicted"
+        )
+    print(
+        f"  false alarms {mc.false_alarms} in {mc.hours:.2f} h = {mc.false_alarms_per_hour:.3g} per hour observed, "
+        f"at most {mc.predicted_per_hour:.3g} predicted"
+    )
     times = [t for t in mc.detection_times_s if t is not None]
     spread = f" (after {min(times):.2f} .. {max(times):.2f} s)" if times else ""
-    print(f"  bias {mc.bias:.4g}    detected within {r.within_s:g} s in {mc.detected_within} of {mc.flights} "
-          f"flights{spread}")
-    print(f"  smallest     bias detected within {r.within_s:g} s: {mc.smallest_bias_95:.4g} {u} in 95 % of the "
-          f"flights (per flight {min(mc.smallest_bias):.3g} .. {max(mc.smallest_bias):.3g}); predicted "
-          f"{r.bias:.4g}: ratio {_fmt(_ratio(mc.smallest_bias_95, r.bias))}")
+    print(
+        f"  bias {mc.bias:.4g}    detected within {r.within_s:g} s in {mc.detected_within} of {mc.flights} "
+        f"flights{spread}"
+    )
+    print(
+        f"  smallest     bias detected within {r.within_s:g} s: {mc.smallest_bias_95:.4g} {u} in 95 % of the "
+        f"flights (per flight {min(mc.smallest_bias):.3g} .. {max(mc.smallest_bias):.3g}); predicted "
+        f"{r.bias:.4g}: ratio {_fmt(_ratio(mc.smallest_bias_95, r.bias))}"
+    )
 
 
 def _fmt(x: float | None) -> str:

@@ -18,8 +18,8 @@ __all__ = ["register"]
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "identify", help="identify a continuous plant from a flight log (.tlog, or DataFlash .bin/.log) with an "
-                         "elevator manoeuvre",
+        "identify",
+        help="identify a continuous plant from a flight log (.tlog, or DataFlash .bin/.log) with an elevator manoeuvre",
         description=(
             "Fit x' = A_c x + B_c u (deviations from the operating point) to a telemetry log of a flight with an "
             "elevator manoeuvre (e.g. sim-vehicle run --excite prbs:1:60), every state measured: least squares on "
@@ -28,59 +28,114 @@ def register(subparsers) -> None:
             "output, NRMSE). Writes a plant file that 'fault-monitor design' takes as it is, with its signal map "
             "and operating point. Exit 2 with one line when the log cannot be identified from (no excitation, "
             "missing signals, too short). An ArduPilot on-board DataFlash log (.bin, or its text form .log) is read "
-            "too, with --signals naming its own messages (e.g. AOA.AOA, RATE.P, RCOU.C2) and TimeUS as the clock."),
+            "too, with --signals naming its own messages (e.g. AOA.AOA, RATE.P, RCOU.C2) and TimeUS as the clock."
+        ),
         epilog="Example: fault-monitor identify flight.tlog --out c172p.toml && "
-               "fault-monitor design --plant c172p.toml --out gains.toml")
-    p.add_argument("tlog", metavar="FLIGHT.tlog", help="the telemetry log (MAVProxy / QGroundControl format), or a "
-                   "DataFlash log (.bin, .log)")
+        "fault-monitor design --plant c172p.toml --out gains.toml",
+    )
+    p.add_argument(
+        "tlog",
+        metavar="FLIGHT.tlog",
+        help="the telemetry log (MAVProxy / QGroundControl format), or a DataFlash log (.bin, .log)",
+    )
     p.add_argument("--out", required=True, metavar="PLANT.toml", help="the plant file to write")
-    p.add_argument("--model", choices=("short-period", "longitudinal"), default="longitudinal",
-                   help="states: short-period = alpha, q; longitudinal = alpha, q, theta, airspeed "
-                        "(default: longitudinal)")
-    p.add_argument("--h", type=float, metavar="S", help="sampling period of the plant, a whole multiple of the "
-                   "log's own sample spacing (default: that spacing, from the instant message's time stamps)")
-    p.add_argument("--tau-min", type=float, metavar="S", default=0.0, help="lower bound of the network delay "
-                   "written to the plant (default: 0)")
-    p.add_argument("--tau-max", type=float, metavar="S", help="upper bound of the network delay written to the "
-                   "plant (default: 0.46 h); it may reach past h (a radio or cellular link): the monitor then "
-                   "carries the commands in flight in its state")
-    p.add_argument("--turbulence", metavar="LEVEL", choices=TURBULENCE_LEVELS, help="the turbulence the flight met "
-                   f"({', '.join(TURBULENCE_LEVELS)}), written beside the gust measured from the log ([disturbance]); information for "
-                   "detectability, which scales the gust to other levels")
-    p.add_argument("--air-only", metavar="PLANT.toml", help="keep PLANT's model and measure only the air this log "
-                   "flew in: PLANT is written to --out with its [disturbance] table measured from this log (with "
-                   "--turbulence LEVEL, the level flown). Identify the dynamics in calm air, then the gust from a "
-                   "flight in turbulence: a turbulent flight spoils the dynamics' fit")
-    p.add_argument("--actuator-limit", type=float, metavar="DEG", default=DEFAULT_ACTUATOR_LIMIT,
-                   help="elevator limit about trim written to [actuator] (default: 25.0; a log shows the "
-                        "deflections flown, not the aircraft's stops)")
-    p.add_argument("--signals", metavar="FILE", help="a [signals] table naming where alpha, q, theta, airspeed "
-                   "and the elevator are in the log (default: AOA_SSA.AOA, ATTITUDE.pitchspeed and .pitch, "
-                   "VFR_HUD.airspeed, ACTUATOR_OUTPUT_STATUS.actuator[0])")
-    p.add_argument("--sysid", type=int, metavar="N", help="the vehicle to identify (needed when the log holds "
-                   "several)")
+    p.add_argument(
+        "--model",
+        choices=("short-period", "longitudinal"),
+        default="longitudinal",
+        help="states: short-period = alpha, q; longitudinal = alpha, q, theta, airspeed (default: longitudinal)",
+    )
+    p.add_argument(
+        "--h",
+        type=float,
+        metavar="S",
+        help="sampling period of the plant, a whole multiple of the "
+        "log's own sample spacing (default: that spacing, from the instant message's time stamps)",
+    )
+    p.add_argument(
+        "--tau-min",
+        type=float,
+        metavar="S",
+        default=0.0,
+        help="lower bound of the network delay written to the plant (default: 0)",
+    )
+    p.add_argument(
+        "--tau-max",
+        type=float,
+        metavar="S",
+        help="upper bound of the network delay written to the "
+        "plant (default: 0.46 h); it may reach past h (a radio or cellular link): the monitor then "
+        "carries the commands in flight in its state",
+    )
+    p.add_argument(
+        "--turbulence",
+        metavar="LEVEL",
+        choices=TURBULENCE_LEVELS,
+        help="the turbulence the flight met "
+        f"({', '.join(TURBULENCE_LEVELS)}), written beside the gust measured from the log ([disturbance]); information for "
+        "detectability, which scales the gust to other levels",
+    )
+    p.add_argument(
+        "--air-only",
+        metavar="PLANT.toml",
+        help="keep PLANT's model and measure only the air this log "
+        "flew in: PLANT is written to --out with its [disturbance] table measured from this log (with "
+        "--turbulence LEVEL, the level flown). Identify the dynamics in calm air, then the gust from a "
+        "flight in turbulence: a turbulent flight spoils the dynamics' fit",
+    )
+    p.add_argument(
+        "--actuator-limit",
+        type=float,
+        metavar="DEG",
+        default=DEFAULT_ACTUATOR_LIMIT,
+        help="elevator limit about trim written to [actuator] (default: 25.0; a log shows the "
+        "deflections flown, not the aircraft's stops)",
+    )
+    p.add_argument(
+        "--signals",
+        metavar="FILE",
+        help="a [signals] table naming where alpha, q, theta, airspeed "
+        "and the elevator are in the log (default: AOA_SSA.AOA, ATTITUDE.pitchspeed and .pitch, "
+        "VFR_HUD.airspeed, ACTUATOR_OUTPUT_STATUS.actuator[0])",
+    )
+    p.add_argument("--sysid", type=int, metavar="N", help="the vehicle to identify (needed when the log holds several)")
     p.add_argument("--name", help="the plant's name (default: the output file's stem)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    req = IdentifyRequest(log=args.tlog, out=args.out, model=args.model, h=args.h, tau_max=args.tau_max,
-                          tau_min=args.tau_min, turbulence=args.turbulence, air_only=args.air_only,
-                          actuator_limit=args.actuator_limit, signals=args.signals, sysid=args.sysid, name=args.name)
+    req = IdentifyRequest(
+        log=args.tlog,
+        out=args.out,
+        model=args.model,
+        h=args.h,
+        tau_max=args.tau_max,
+        tau_min=args.tau_min,
+        turbulence=args.turbulence,
+        air_only=args.air_only,
+        actuator_limit=args.actuator_limit,
+        signals=args.signals,
+        sysid=args.sysid,
+        name=args.name,
+    )
     done = identify_log(req, say=lambda text: print(f"identify: {text}", file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps(done.report()))
         return 0
     if isinstance(done, AirMeasured):
         print(f"measured the air of {req.log} (sysid {done.sysid}) with the model of {req.air_only}: {done.summary}")
-        print(f"wrote {req.out}: {req.air_only} with that [disturbance] table"
-              + (f" (turbulence {req.turbulence})" if req.turbulence else ""))
+        print(
+            f"wrote {req.out}: {req.air_only} with that [disturbance] table"
+            + (f" (turbulence {req.turbulence})" if req.turbulence else "")
+        )
         return 0
     print(_format(done.result, req.log, done.sysid, req.model, done.units))
-    print(f"wrote {req.out}: tau in [{req.tau_min:g}, {done.tau_max:g}] s, actuator limit {req.actuator_limit:g} deg "
-          f"({'given' if req.actuator_limit != DEFAULT_ACTUATOR_LIMIT else 'default'}); "
-          f"{done.flight.records} log records in {done.seconds:.2f} s")
+    print(
+        f"wrote {req.out}: tau in [{req.tau_min:g}, {done.tau_max:g}] s, actuator limit {req.actuator_limit:g} deg "
+        f"({'given' if req.actuator_limit != DEFAULT_ACTUATOR_LIMIT else 'default'}); "
+        f"{done.flight.records} log records in {done.seconds:.2f} s"
+    )
     for line in done.flight.inventory.lines():
         print(f"log holds: {line}")
     return 0
@@ -90,8 +145,9 @@ def _format(result, path: str, sysid: int, model: str, units: tuple[str, ...]) -
     ex = result.excitation
     unit_of = dict(zip(result.state_names, units))
     unit_of.update({name: "deg" for name in result.input_names})
-    op = ", ".join(f"{name} {value:.4f} {unit_of.get(name, '')}".rstrip() for name, value in
-                   result.operating_point.items())
+    op = ", ".join(
+        f"{name} {value:.4f} {unit_of.get(name, '')}".rstrip() for name, value in result.operating_point.items()
+    )
     lines = [
         f"identified {model} model ({', '.join(result.state_names)}) from {path} (sysid {sysid}): "
         f"{result.samples} samples at h = {result.h:g} s",
@@ -104,8 +160,10 @@ def _format(result, path: str, sysid: int, model: str, units: tuple[str, ...]) -
     ]
     for i, mode in enumerate(result.modes):
         lines.append(("modes       " if i == 0 else "            ") + mode.describe())
-    lines.append("fit on held-out data (free run, NRMSE)  " +
-                 ", ".join(f"{s} {f:.1f} %" for s, f in result.fit_validation.items()))
+    lines.append(
+        "fit on held-out data (free run, NRMSE)  "
+        + ", ".join(f"{s} {f:.1f} %" for s, f in result.fit_validation.items())
+    )
     for note in result.notes:
         lines.append(f"note: {note}")
     return "\n".join(lines)

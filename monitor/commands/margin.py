@@ -20,27 +20,46 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--plant", required=True, metavar="P", help="preset (paper, paper-continuous) or plant TOML file")
-    parser.add_argument("--objective", choices=("fast", "hinf"), default="fast",
-                        help="certified design objective used at each probe (default: fast)")
-    parser.add_argument("--tolerance", type=float, default=None, metavar="S",
-                        help="stop bisecting when the bracket is narrower than S seconds (default: h/200)")
-    parser.add_argument("--up-to", type=float, default=None, metavar="S",
-                        help="search tau_max up to S seconds, past h if you like (default: h for a plant within one "
-                             "sample; 3 whole samples above tau_min for a plant whose interval already reaches past h)")
+    parser.add_argument(
+        "--plant", required=True, metavar="P", help="preset (paper, paper-continuous) or plant TOML file"
+    )
+    parser.add_argument(
+        "--objective",
+        choices=("fast", "hinf"),
+        default="fast",
+        help="certified design objective used at each probe (default: fast)",
+    )
+    parser.add_argument(
+        "--tolerance",
+        type=float,
+        default=None,
+        metavar="S",
+        help="stop bisecting when the bracket is narrower than S seconds (default: h/200)",
+    )
+    parser.add_argument(
+        "--up-to",
+        type=float,
+        default=None,
+        metavar="S",
+        help="search tau_max up to S seconds, past h if you like (default: h for a plant within one "
+        "sample; 3 whole samples above tau_min for a plant whose interval already reaches past h)",
+    )
     parser.add_argument("--points", type=int, default=6, metavar="N", help="points of the gamma_e curve (default: 6)")
-    parser.add_argument("--json", action="store_true",
-                        help='print {"tau_max": ..., "curve": [{"tau_max": ..., "gamma_e": ...}, ...], "no_certificate_at": '
-                             '(the probe above the margin that failed), ...} on stdout')
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help='print {"tau_max": ..., "curve": [{"tau_max": ..., "gamma_e": ...}, ...], "no_certificate_at": '
+        "(the probe above the margin that failed), ...} on stdout",
+    )
     parser.add_argument("--out", metavar="GAINS.toml", help="write the gains designed at the margin")
     parser.add_argument("--png", metavar="FILE", help="plot gamma_e against tau_max")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from monitor.checks.margin import delay_margin
     from monitor.errors import UserError
     from monitor.gains import write_gains
-    from monitor.checks.margin import delay_margin
     from monitor.model.plant import load_plant
 
     plant = load_plant(args.plant)
@@ -51,34 +70,55 @@ def run(args: argparse.Namespace) -> int:
 
         first, last = lag_span(plant.h, plant.tau_min, args.up_to)
         if not plant.tau_min < args.up_to or last - first + 1 > MAX_LAG_PARTS:
-            raise UserError(f"--up-to must be above the plant's tau_min = {plant.tau_min:g} s and within "
-                            f"{MAX_LAG_PARTS} whole samples of it (h = {plant.h:g} s), got {args.up_to}")
+            raise UserError(
+                f"--up-to must be above the plant's tau_min = {plant.tau_min:g} s and within "
+                f"{MAX_LAG_PARTS} whole samples of it (h = {plant.h:g} s), got {args.up_to}"
+            )
     if args.points < 2:
         raise UserError(f"--points must be >= 2, got {args.points}")
     say = lambda text: print(text, file=sys.stderr, flush=True)  # noqa: E731
     from monitor.checks.margin import search_ceiling
 
     top = search_ceiling(plant, args.up_to)
-    say(f"bisecting tau_max in [{plant.tau_min}, {top:g}) for plant '{plant.name}' ({args.objective} design at each probe)")
-    margin = delay_margin(plant, tolerance=args.tolerance, curve_points=args.points, progress=say,
-                          objective=args.objective, up_to=args.up_to)
+    say(
+        f"bisecting tau_max in [{plant.tau_min}, {top:g}) for plant '{plant.name}' ({args.objective} design at each probe)"
+    )
+    margin = delay_margin(
+        plant,
+        tolerance=args.tolerance,
+        curve_points=args.points,
+        progress=say,
+        objective=args.objective,
+        up_to=args.up_to,
+    )
     if args.out:
         write_gains(args.out, margin.design, margin.plant)
     if args.png:
         _plot(margin, args.png, plant)
-    doc = {"tau_max": margin.tau_max, "curve": margin.curve, "h": plant.h, "tau_min": plant.tau_min,
-           "objective": args.objective, "gamma_e_at_margin": margin.design.gamma_e, "probes": margin.probes,
-           "no_certificate_at": margin.no_certificate_at,
-           "plant_interval": [plant.tau_min, plant.tau_max]}
+    doc = {
+        "tau_max": margin.tau_max,
+        "curve": margin.curve,
+        "h": plant.h,
+        "tau_min": plant.tau_min,
+        "objective": args.objective,
+        "gamma_e_at_margin": margin.design.gamma_e,
+        "probes": margin.probes,
+        "no_certificate_at": margin.no_certificate_at,
+        "plant_interval": [plant.tau_min, plant.tau_max],
+    }
     if args.json:
         print(json.dumps(doc))
     else:
-        print(f"delay margin  tau_max = {margin.tau_max:.4f} s ({margin.tau_max / plant.h:.1%} of h = {plant.h} s; "
-              f"the plant file says {plant.tau_max})")
+        print(
+            f"delay margin  tau_max = {margin.tau_max:.4f} s ({margin.tau_max / plant.h:.1%} of h = {plant.h} s; "
+            f"the plant file says {plant.tau_max})"
+        )
         for point in margin.curve:
             print(f"  tau_max {point['tau_max']:.4f} s   gamma_e {point['gamma_e']:.4f}")
         if args.out:
-            print(f"wrote gains at the margin to {args.out} (designed for tau in [{plant.tau_min}, {margin.tau_max:.4f}])")
+            print(
+                f"wrote gains at the margin to {args.out} (designed for tau in [{plant.tau_min}, {margin.tau_max:.4f}])"
+            )
     return 0
 
 

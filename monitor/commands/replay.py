@@ -40,13 +40,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("file", metavar="FILE.rrd", help="recording written by `fault-monitor run --rrd`")
     parser.add_argument("--json", action="store_true", help="print the analysis as one JSON object")
-    parser.add_argument("--sysid", type=int, metavar="N",
-                        help="analyse only the vehicle with MAVLink system id N")
-    parser.add_argument("--fault", metavar="SPEC",
-                        help="the fault the vehicle ran with (bias:2@20, ramp:0.1@20, ...), used when the "
-                             "recording holds no truth stream")
-    parser.add_argument("--tol", type=float, default=0.05, metavar="FRAC",
-                        help="settling band as a fraction of the fault size (default: 0.05)")
+    parser.add_argument("--sysid", type=int, metavar="N", help="analyse only the vehicle with MAVLink system id N")
+    parser.add_argument(
+        "--fault",
+        metavar="SPEC",
+        help="the fault the vehicle ran with (bias:2@20, ramp:0.1@20, ...), used when the "
+        "recording holds no truth stream",
+    )
+    parser.add_argument(
+        "--tol",
+        type=float,
+        default=0.05,
+        metavar="FRAC",
+        help="settling band as a fraction of the fault size (default: 0.05)",
+    )
     parser.set_defaults(func=run)
 
 
@@ -76,15 +83,19 @@ def _num(value: float | None, unit: str = "", fmt: str = ".3g") -> str:
 def _stats(stats: dict[str, float] | None, scale: float, unit: str) -> str:
     if not stats:
         return "n/a"
-    return (f"p50 {_num(stats['p50'] * scale, unit)}  p99 {_num(stats['p99'] * scale, unit)}  "
-            f"max {_num(stats['max'] * scale, unit)}  (n={stats['n']})")
+    return (
+        f"p50 {_num(stats['p50'] * scale, unit)}  p99 {_num(stats['p99'] * scale, unit)}  "
+        f"max {_num(stats['max'] * scale, unit)}  (n={stats['n']})"
+    )
 
 
 def _vehicle_lines(v: dict[str, Any]) -> list[str]:
     lines = [f"vehicle {v['sysid']}: {v['samples']} samples"]
     if v["samples"]:
-        lines[0] += (f", k {v['k_first']}..{v['k_last']} ({v['missing']} never received), "
-                     f"t {v['t_first']:.3f}..{v['t_last']:.3f} s")
+        lines[0] += (
+            f", k {v['k_first']}..{v['k_last']} ({v['missing']} never received), "
+            f"t {v['t_first']:.3f}..{v['t_last']:.3f} s"
+        )
     if v["onset_k"] is not None:
         source = f"SPEC {v['fault_spec']}" if v["fault_source"] == "spec" else "the recorded truth"
         lines.append(f"  fault          size {_num(v['fault_size'])} from k={v['onset_k']} (from {source})")
@@ -98,14 +109,20 @@ def _vehicle_lines(v: dict[str, Any]) -> list[str]:
         alarm = f"k={v['first_alarm_k']} (t={_num(v['first_alarm_t'], ' s', '.3f')})"
         if v["detection_steps"] is not None:
             alarm += f"; detected {v['detection_steps']} steps ({_num(v['detection_s'], ' s')}) after onset"
-    false = ("false alarms unknown (no truth, no --fault SPEC)" if v["false_alarms"] is None
-             else f"{v['false_alarms']} false alarm(s) before onset")
+    false = (
+        "false alarms unknown (no truth, no --fault SPEC)"
+        if v["false_alarms"] is None
+        else f"{v['false_alarms']} false alarm(s) before onset"
+    )
     lines.append(f"  first alarm    {alarm}; {false}")
     if v.get("fault_note"):
         lines.append(f"  note           {v['fault_note']}")
     if v["onset_k"] is not None:
-        settle = ("never within the band" if v["settling_steps"] is None else
-                  f"{v['settling_steps']} steps ({_num(v['settling_s'], ' s')}) after onset")
+        settle = (
+            "never within the band"
+            if v["settling_steps"] is None
+            else f"{v['settling_steps']} steps ({_num(v['settling_s'], ' s')}) after onset"
+        )
         lines.append(f"  settling       {settle} (band {v['settling_tol']:.0%} of the fault)")
     if v["rms_ef"] is not None:
         post = _num(v["rms_ef_after_onset"])
@@ -121,9 +138,11 @@ def _vehicle_lines(v: dict[str, Any]) -> list[str]:
 def format_report(report: dict[str, Any]) -> str:
     """The human-readable report: a header about the file, then one block per vehicle."""
     props = report["properties"]
-    header = (f"recording {report['file']} ({report['application_id']}, fault-monitor "
-              f"{props.get('fault_monitor_version', '?')}, rerun-sdk {props.get('rerun_sdk_version', '?')}, "
-              f"{len(report['sysids'])} vehicle(s))")
+    header = (
+        f"recording {report['file']} ({report['application_id']}, fault-monitor "
+        f"{props.get('fault_monitor_version', '?')}, rerun-sdk {props.get('rerun_sdk_version', '?')}, "
+        f"{len(report['sysids'])} vehicle(s))"
+    )
     lines = [header]
     if not report["complete"]:
         lines.append("  note: no footer (the writer did not close the file); the rows present were read")
@@ -132,7 +151,9 @@ def format_report(report: dict[str, Any]) -> str:
     for v in report["vehicles"].values():
         lines.extend(_vehicle_lines(v))
     if len(report["sysids"]) > 1:
-        lines.append(f"fleet: {report['samples']} samples, worst settling {_num(report['settling_steps'])} "
-                     f"steps, worst rms e_f {_num(report['rms_ef'])}, peak |alpha| "
-                     f"{_num(report['peak_alpha'], ' deg')}, {_num(report['false_alarms'])} false alarm(s)")
+        lines.append(
+            f"fleet: {report['samples']} samples, worst settling {_num(report['settling_steps'])} "
+            f"steps, worst rms e_f {_num(report['rms_ef'])}, peak |alpha| "
+            f"{_num(report['peak_alpha'], ' deg')}, {_num(report['false_alarms'])} false alarm(s)"
+        )
     return "\n".join(lines)

@@ -17,18 +17,33 @@ DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "router", help="a Zenoh router, so monitors, vehicles and subscribers on several hosts see each other",
+        "router",
+        help="a Zenoh router, so monitors, vehicles and subscribers on several hosts see each other",
         description=(
             "Run a Zenoh router: monitors, vehicles and subscribers connect to it as clients "
             "(--zenoh-mode client --zenoh-connect EP) and see each other's estimates, alarms and truth. "
             f"Listens on {DEFAULT_LISTEN} unless told otherwise; multicast and gossip scouting off. "
-            "Stops on SIGINT/SIGTERM with exit code 0."),
+            "Stops on SIGINT/SIGTERM with exit code 0."
+        ),
         epilog="Example: fault-monitor router -l tcp/127.0.0.1:7447   then   fault-monitor run ... "
-               "--zenoh-mode client --zenoh-connect tcp/127.0.0.1:7447")
-    p.add_argument("-l", "--listen", action="append", default=[], metavar="EP",
-                   help=f"endpoint to listen on (repeatable; default {DEFAULT_LISTEN})")
-    p.add_argument("-e", "--connect", action="append", default=[], metavar="EP",
-                   help="another router or peer to connect to (repeatable)")
+        "--zenoh-mode client --zenoh-connect tcp/127.0.0.1:7447",
+    )
+    p.add_argument(
+        "-l",
+        "--listen",
+        action="append",
+        default=[],
+        metavar="EP",
+        help=f"endpoint to listen on (repeatable; default {DEFAULT_LISTEN})",
+    )
+    p.add_argument(
+        "-e",
+        "--connect",
+        action="append",
+        default=[],
+        metavar="EP",
+        help="another router or peer to connect to (repeatable)",
+    )
     p.add_argument("-c", "--config", metavar="FILE", help="a Zenoh JSON5 config file, as zenohd's -c")
     p.set_defaults(func=run)
 
@@ -47,8 +62,12 @@ def run(args: argparse.Namespace) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     try:
-        log.info("ready: Zenoh router %s, listening on %s%s", session.zid(), ", ".join(listen) or "(config file)",
-                 f", connected to {', '.join(args.connect)}" if args.connect else "")
+        log.info(
+            "ready: Zenoh router %s, listening on %s%s",
+            session.zid(),
+            ", ".join(listen) or "(config file)",
+            f", connected to {', '.join(args.connect)}" if args.connect else "",
+        )
         while not stop.wait(1.0):
             pass
     finally:

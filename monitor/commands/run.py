@@ -12,17 +12,28 @@ __all__ = ["register", "add_model_arguments", "load_models", "add_alarm_argument
 
 def add_model_arguments(p: argparse.ArgumentParser, fleet: bool = True) -> None:
     """The flags that say which plant, gains and signal map serve the vehicles (shared with ``analyse``)."""
-    p.add_argument("--plant", metavar="P", help="plant preset (paper, paper-continuous) or plant TOML file"
-                   + (": the default model for every vehicle the fleet file does not list" if fleet else ""))
+    p.add_argument(
+        "--plant",
+        metavar="P",
+        help="plant preset (paper, paper-continuous) or plant TOML file"
+        + (": the default model for every vehicle the fleet file does not list" if fleet else ""),
+    )
     p.add_argument("--gains", metavar="GAINS.toml", help="gains file for --plant (from fault-monitor design)")
-    p.add_argument("--signals", metavar="FILE", help="signal map for --plant: a TOML file with a [signals] table "
-                   "naming the MAVLink fields of y, the actuator report and the command, and optionally the "
-                   "operating_point the plant was identified about (default: the plant file's "
-                   "own [signals], else the contract's AOA_SSA / ATTITUDE / ACTUATOR_OUTPUT_STATUS mapping)")
+    p.add_argument(
+        "--signals",
+        metavar="FILE",
+        help="signal map for --plant: a TOML file with a [signals] table "
+        "naming the MAVLink fields of y, the actuator report and the command, and optionally the "
+        "operating_point the plant was identified about (default: the plant file's "
+        "own [signals], else the contract's AOA_SSA / ATTITUDE / ACTUATOR_OUTPUT_STATUS mapping)",
+    )
     p.add_argument("--force", action="store_true", help="run gains designed for another plant (hash mismatch)")
     if fleet:
-        p.add_argument("--fleet", metavar="FLEET.toml",
-                       help="per-vehicle models: [vehicle.<sysid>] tables with plant, gains and optional signals")
+        p.add_argument(
+            "--fleet",
+            metavar="FLEET.toml",
+            help="per-vehicle models: [vehicle.<sysid>] tables with plant, gains and optional signals",
+        )
 
 
 def load_models(args: argparse.Namespace, layouts=None):
@@ -41,8 +52,7 @@ def load_models(args: argparse.Namespace, layouts=None):
         raise UserError("--signals applies to --plant; in a fleet file give each vehicle a 'signals' key")
     from monitor.link.signals import MAVLINK
 
-    default = (load_model(args.plant, args.gains, args.force, args.signals, layouts or MAVLINK) if args.plant
-               else None)
+    default = load_model(args.plant, args.gains, args.force, args.signals, layouts or MAVLINK) if args.plant else None
     return load_fleet(fleet_file, default, args.force) if fleet_file else Fleet(default)
 
 
@@ -57,22 +67,42 @@ def _threshold_value(text: str) -> float | str:
 
 def add_alarm_arguments(group) -> None:
     """The alarm's hysteresis flags (shared with ``analyse``, so a log is scored as the live run was)."""
-    group.add_argument("--alarm-threshold", type=_threshold_value, default=1.0, metavar="X",
-                       help="raise when max |f_hat| >= X (plant units) for --alarm-samples samples in a row; "
-                            f"'auto': {AUTO_MARGIN} x the proven bound on |f_hat| with no fault and |d| <= "
-                            "--disturbance-bound (fault-monitor threshold), so wind alone cannot raise it; or, "
-                            "with --turbulence, the level crossed once per flight hour in that turbulence "
-                            "(fault-monitor detectability) (default: 1.0)")
-    group.add_argument("--disturbance-bound", type=float, default=None, metavar="D",
-                       help="with --alarm-threshold auto: the largest |d(k)| the vehicle meets (plant units)")
-    group.add_argument("--turbulence", choices=TURBULENCE_LEVELS[1:], default=None, metavar="LEVEL",
-                       help="with --alarm-threshold auto, instead of --disturbance-bound: the turbulence flown "
-                            "(light, moderate, severe at 3000 ft; needs the plant's [disturbance] table)")
-    group.add_argument("--alarm-clear", type=float, default=None, metavar="Y",
-                       help="clear when max |f_hat| < Y for --alarm-samples samples in a row "
-                            "(default: half the threshold)")
-    group.add_argument("--alarm-samples", type=int, default=2, metavar="N",
-                       help="persistence of raise and clear (default: 2)")
+    group.add_argument(
+        "--alarm-threshold",
+        type=_threshold_value,
+        default=1.0,
+        metavar="X",
+        help="raise when max |f_hat| >= X (plant units) for --alarm-samples samples in a row; "
+        f"'auto': {AUTO_MARGIN} x the proven bound on |f_hat| with no fault and |d| <= "
+        "--disturbance-bound (fault-monitor threshold), so wind alone cannot raise it; or, "
+        "with --turbulence, the level crossed once per flight hour in that turbulence "
+        "(fault-monitor detectability) (default: 1.0)",
+    )
+    group.add_argument(
+        "--disturbance-bound",
+        type=float,
+        default=None,
+        metavar="D",
+        help="with --alarm-threshold auto: the largest |d(k)| the vehicle meets (plant units)",
+    )
+    group.add_argument(
+        "--turbulence",
+        choices=TURBULENCE_LEVELS[1:],
+        default=None,
+        metavar="LEVEL",
+        help="with --alarm-threshold auto, instead of --disturbance-bound: the turbulence flown "
+        "(light, moderate, severe at 3000 ft; needs the plant's [disturbance] table)",
+    )
+    group.add_argument(
+        "--alarm-clear",
+        type=float,
+        default=None,
+        metavar="Y",
+        help="clear when max |f_hat| < Y for --alarm-samples samples in a row (default: half the threshold)",
+    )
+    group.add_argument(
+        "--alarm-samples", type=int, default=2, metavar="N", help="persistence of raise and clear (default: 2)"
+    )
 
 
 def alarm_from_args(args: argparse.Namespace, fleet=None):
@@ -86,25 +116,36 @@ def alarm_from_args(args: argparse.Namespace, fleet=None):
     turbulence = getattr(args, "turbulence", None)
     if threshold == "auto" and turbulence is not None:
         if args.disturbance_bound is not None:
-            raise UserError("--alarm-threshold auto takes one of --disturbance-bound D and --turbulence LEVEL, not both")
+            raise UserError(
+                "--alarm-threshold auto takes one of --disturbance-bound D and --turbulence LEVEL, not both"
+            )
         from monitor.checks.detectability import turbulence_threshold
 
         models = fleet.models() if fleet else []
         if not models:
             raise UserError("--alarm-threshold auto needs the vehicles' plant and gains")
-        threshold = max(turbulence_threshold(m.plant, m.gains.gains, turbulence,
-                                             report_time_constant=getattr(m.gains, "fault_time_constant", None))
-                        for m in models)
+        threshold = max(
+            turbulence_threshold(
+                m.plant, m.gains.gains, turbulence, report_time_constant=getattr(m.gains, "fault_time_constant", None)
+            )
+            for m in models
+        )
         logging.getLogger("monitor.alarm").info(
             "alarm threshold auto: %.4g, crossed about once per flight hour in %s turbulence (fault-monitor "
-            "detectability)", threshold, turbulence)
+            "detectability)",
+            threshold,
+            turbulence,
+        )
     elif threshold == "auto":
         if args.disturbance_bound is None:
-            raise UserError("--alarm-threshold auto needs --disturbance-bound D (the largest |d| to tolerate) "
-                            "or --turbulence LEVEL")
+            raise UserError(
+                "--alarm-threshold auto needs --disturbance-bound D (the largest |d| to tolerate) or --turbulence LEVEL"
+            )
         from monitor.checks.threshold import fault_threshold
 
-        bounds = [fault_threshold(m.plant, m.gains.gains, args.disturbance_bound) for m in (fleet.models() if fleet else [])]
+        bounds = [
+            fault_threshold(m.plant, m.gains.gains, args.disturbance_bound) for m in (fleet.models() if fleet else [])
+        ]
         if not bounds:
             raise UserError("--alarm-threshold auto needs the vehicles' plant and gains")
         worst = max(bounds, key=lambda b: b.threshold)
@@ -113,10 +154,17 @@ def alarm_from_args(args: argparse.Namespace, fleet=None):
             raise UserError("--alarm-threshold auto: the proven bound is 0 (no disturbance reaches f_hat); give X")
         logging.getLogger("monitor.alarm").info(
             "alarm threshold auto: %.4g = %.2f x the proven bound %.4g on |f_hat| with no fault and |d| <= %g "
-            "(the l1 norm at the worst constant delay is %.4g)", threshold, AUTO_MARGIN, worst.threshold,
-            args.disturbance_bound, worst.frozen_l1 * args.disturbance_bound)
+            "(the l1 norm at the worst constant delay is %.4g)",
+            threshold,
+            AUTO_MARGIN,
+            worst.threshold,
+            args.disturbance_bound,
+            worst.frozen_l1 * args.disturbance_bound,
+        )
     elif args.disturbance_bound is not None or turbulence is not None:
-        raise UserError(f"--{'turbulence' if turbulence else 'disturbance-bound'} applies to --alarm-threshold auto only")
+        raise UserError(
+            f"--{'turbulence' if turbulence else 'disturbance-bound'} applies to --alarm-threshold auto only"
+        )
     clear = args.alarm_clear if args.alarm_clear is not None else 0.5 * threshold
     try:
         return AlarmConfig(threshold, clear, args.alarm_samples)
@@ -126,7 +174,8 @@ def alarm_from_args(args: argparse.Namespace, fleet=None):
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "run", help="the live monitor daemon: MAVLink in and out, estimates on Zenoh, optional .rrd recording",
+        "run",
+        help="the live monitor daemon: MAVLink in and out, estimates on Zenoh, optional .rrd recording",
         description=(
             "Receive vehicles' MAVLink telemetry (directly, or through MAVProxy, mavlink-router or an autopilot's "
             "TCP port), assemble one sample per sampling instant and system id, run the observer and the "
@@ -134,46 +183,95 @@ def register(subparsers) -> None:
             "(not with --observe), tell ground stations (NAMED_VALUE_FLOAT FHAT, STATUSTEXT on alarms), publish "
             "estimates and alarms on Zenoh (<prefix>/<sysid>/fault/estimate|alarm, queryable "
             "<prefix>/<sysid>/fault/status, liveliness <prefix>/monitor/<name>) and optionally record every "
-            "sample to a Rerun .rrd. Stops on SIGINT/SIGTERM with exit code 0 after flushing the recording."),
+            "sample to a Rerun .rrd. Stops on SIGINT/SIGTERM with exit code 0 after flushing the recording."
+        ),
         epilog="Example: fault-monitor run --plant paper-continuous --gains gains.toml "
-               "--mavlink udpin:127.0.0.1:14550 --rrd run.rrd   (or: fault-monitor run --config monitor.toml)")
-    p.add_argument("--config", metavar="FILE.toml", help="a TOML file whose keys are these long flag names "
-                   "(- or _; lists for repeatable flags, true/false for switches); flags given here override it")
+        "--mavlink udpin:127.0.0.1:14550 --rrd run.rrd   (or: fault-monitor run --config monitor.toml)",
+    )
+    p.add_argument(
+        "--config",
+        metavar="FILE.toml",
+        help="a TOML file whose keys are these long flag names "
+        "(- or _; lists for repeatable flags, true/false for switches); flags given here override it",
+    )
     add_model_arguments(p)
     link = p.add_argument_group("MAVLink")
-    link.add_argument("--mavlink", action="append", default=None, metavar="CONN",
-                      help="a connection as MAVProxy writes it: udpin:HOST:PORT (listen), udpout:HOST:PORT (send to a "
-                      "router; the monitor's 1 Hz HEARTBEAT makes it route vehicles back), tcp:HOST:PORT (connect, "
-                      "reconnect), tcpin:HOST:PORT (listen). Repeatable. Default: udpin:127.0.0.1:14550")
-    link.add_argument("--observe", action="store_true",
-                      help="observe-only: the vehicle's own autopilot flies; send no commands, run the observer with "
-                      "the u(k) the vehicle reports in its actuator message")
-    link.add_argument("--no-gcs-feedback", dest="gcs_feedback", action="store_false",
-                      help="do not send NAMED_VALUE_FLOAT FHAT and alarm STATUSTEXT back on the vehicle's link")
-    link.add_argument("--assembly-wait", type=float, default=0.02, metavar="S",
-                      help="how long a sample that is otherwise complete waits for the vehicle's actuator report "
-                      "(seconds; default: 0.02)")
-    link.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing key (32 raw bytes, 64 hex digits or a "
-                      "passphrase, as sim-vehicle): sign what the monitor sends, refuse unsigned or wrongly signed "
-                      "telemetry")
+    link.add_argument(
+        "--mavlink",
+        action="append",
+        default=None,
+        metavar="CONN",
+        help="a connection as MAVProxy writes it: udpin:HOST:PORT (listen), udpout:HOST:PORT (send to a "
+        "router; the monitor's 1 Hz HEARTBEAT makes it route vehicles back), tcp:HOST:PORT (connect, "
+        "reconnect), tcpin:HOST:PORT (listen). Repeatable. Default: udpin:127.0.0.1:14550",
+    )
+    link.add_argument(
+        "--observe",
+        action="store_true",
+        help="observe-only: the vehicle's own autopilot flies; send no commands, run the observer with "
+        "the u(k) the vehicle reports in its actuator message",
+    )
+    link.add_argument(
+        "--no-gcs-feedback",
+        dest="gcs_feedback",
+        action="store_false",
+        help="do not send NAMED_VALUE_FLOAT FHAT and alarm STATUSTEXT back on the vehicle's link",
+    )
+    link.add_argument(
+        "--assembly-wait",
+        type=float,
+        default=0.02,
+        metavar="S",
+        help="how long a sample that is otherwise complete waits for the vehicle's actuator report "
+        "(seconds; default: 0.02)",
+    )
+    link.add_argument(
+        "--signing-key",
+        metavar="FILE",
+        help="MAVLink 2 signing key (32 raw bytes, 64 hex digits or a "
+        "passphrase, as sim-vehicle): sign what the monitor sends, refuse unsigned or wrongly signed "
+        "telemetry",
+    )
     out = p.add_argument_group("outputs and alarm")
     out.add_argument("--rrd", metavar="FILE", help="record every processed sample to this Rerun file")
-    out.add_argument("--rerun-url", action="append", default=None, metavar="URL",
-                     help="also stream every sample live to the Rerun viewer at this gRPC address, as the viewer "
-                     "prints it (rerun+http://127.0.0.1:9876/proxy). Repeatable. A viewer that is slow or away "
-                     "loses its own oldest samples, never the loop's time nor --rrd's rows")
-    out.add_argument("--rerun-spawn", action="store_true",
-                     help="start a local Rerun viewer (the 'rerun' executable, port 9876 on loopback; or use the one "
-                     "already there) and stream to it as --rerun-url does")
+    out.add_argument(
+        "--rerun-url",
+        action="append",
+        default=None,
+        metavar="URL",
+        help="also stream every sample live to the Rerun viewer at this gRPC address, as the viewer "
+        "prints it (rerun+http://127.0.0.1:9876/proxy). Repeatable. A viewer that is slow or away "
+        "loses its own oldest samples, never the loop's time nor --rrd's rows",
+    )
+    out.add_argument(
+        "--rerun-spawn",
+        action="store_true",
+        help="start a local Rerun viewer (the 'rerun' executable, port 9876 on loopback; or use the one "
+        "already there) and stream to it as --rerun-url does",
+    )
     out.add_argument("--name", help="monitor name in the liveliness key <prefix>/monitor/<name> (default: host-pid)")
-    out.add_argument("--no-truth", dest="truth", action="store_false",
-                     help="do not subscribe to <prefix>/*/truth (the simulator's ground truth, recorded beside f_hat)")
+    out.add_argument(
+        "--no-truth",
+        dest="truth",
+        action="store_false",
+        help="do not subscribe to <prefix>/*/truth (the simulator's ground truth, recorded beside f_hat)",
+    )
     add_alarm_arguments(out)
-    out.add_argument("--vehicle-timeout", type=float, default=10.0, metavar="S",
-                     help="forget a vehicle (its estimator state) after S seconds of silence (default: 10)")
-    out.add_argument("--queue", type=int, default=10_000, metavar="N",
-                     help="Zenoh hand-off queue length; estimates beyond it are dropped (counted), never waited for "
-                     "(default: 10000)")
+    out.add_argument(
+        "--vehicle-timeout",
+        type=float,
+        default=10.0,
+        metavar="S",
+        help="forget a vehicle (its estimator state) after S seconds of silence (default: 10)",
+    )
+    out.add_argument(
+        "--queue",
+        type=int,
+        default=10_000,
+        metavar="N",
+        help="Zenoh hand-off queue length; estimates beyond it are dropped (counted), never waited for "
+        "(default: 10000)",
+    )
     from monitor.wire.zenoh_session import add_zenoh_arguments
 
     add_zenoh_arguments(p)
@@ -223,25 +321,46 @@ def run(args: argparse.Namespace) -> int:
     if not args.zenoh_listen and not args.zenoh_config and args.zenoh_mode != "client":
         args.zenoh_listen = [f"tcp/127.0.0.1:{_free_tcp_port()}"]  # explicit, so the ready line can name it
     endpoints = ", ".join([f"listen {e}" for e in args.zenoh_listen] + [f"connect {e}" for e in args.zenoh_connect])
-    properties = {"monitor_version": __version__, "mavlink": " ".join(str(c) for c in connections),
-                  "key_prefix": args.key_prefix, "mode": "observe" if args.observe else "control",
-                  "alarm": f"threshold={alarm.threshold} clear={alarm.clear} samples={alarm.samples}"}
+    properties = {
+        "monitor_version": __version__,
+        "mavlink": " ".join(str(c) for c in connections),
+        "key_prefix": args.key_prefix,
+        "mode": "observe" if args.observe else "control",
+        "alarm": f"threshold={alarm.threshold} clear={alarm.clear} samples={alarm.samples}",
+    }
     default = fleet.default
     if default is not None:
-        properties.update(plant=default.plant.name, plant_hash=default.plant.digest, gains=str(args.gains),
-                          gains_method=default.gains.method, signals=default.signals.describe(),
-                          **{f"gain_{n}": str(getattr(default.gains.gains, n).tolist()) for n in
-                             ("L", "M", "K1", "K2", "K3")})
+        properties.update(
+            plant=default.plant.name,
+            plant_hash=default.plant.digest,
+            gains=str(args.gains),
+            gains_method=default.gains.method,
+            signals=default.signals.describe(),
+            **{f"gain_{n}": str(getattr(default.gains.gains, n).tolist()) for n in ("L", "M", "K1", "K2", "K3")},
+        )
         if default.signals.operating_point is not None:  # y, x_hat, u, residual in the recording are deviations from it
             import json
 
             properties["operating_point"] = json.dumps(default.signals.operating_point)
     if args.fleet:
         properties["fleet"] = str(args.fleet)
-    config = MonitorConfig(fleet=fleet, connections=connections, prefix=args.key_prefix,
-                           name=args.name or default_name(), rrd=args.rrd, rrd_properties=properties,
-                           signing_key=key, alarm=alarm, vehicle_timeout=args.vehicle_timeout, truth=args.truth,
-                           queue_max=args.queue, observe=args.observe, gcs_feedback=args.gcs_feedback,
-                           assembly_wait=args.assembly_wait, zenoh_endpoints=endpoints, live_urls=live_urls,
-                           spawn_viewer=viewer)
+    config = MonitorConfig(
+        fleet=fleet,
+        connections=connections,
+        prefix=args.key_prefix,
+        name=args.name or default_name(),
+        rrd=args.rrd,
+        rrd_properties=properties,
+        signing_key=key,
+        alarm=alarm,
+        vehicle_timeout=args.vehicle_timeout,
+        truth=args.truth,
+        queue_max=args.queue,
+        observe=args.observe,
+        gcs_feedback=args.gcs_feedback,
+        assembly_wait=args.assembly_wait,
+        zenoh_endpoints=endpoints,
+        live_urls=live_urls,
+        spawn_viewer=viewer,
+    )
     return run_daemon(config, config_from_args(args))

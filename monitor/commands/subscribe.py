@@ -13,11 +13,18 @@ __all__ = ["register"]
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "subscribe", help="print live fault estimates from Zenoh as JSON lines",
+        "subscribe",
+        help="print live fault estimates from Zenoh as JSON lines",
         description="Print every sample on KEYEXPR as one JSON line on stdout until SIGINT/SIGTERM, --count or "
-                    "--duration. Connect to a monitor (peer) or a router with --zenoh-connect.")
-    p.add_argument("keyexpr", nargs="?", default=None, metavar="KEYEXPR",
-                   help="key expression (default: <prefix>/*/fault/estimate)")
+        "--duration. Connect to a monitor (peer) or a router with --zenoh-connect.",
+    )
+    p.add_argument(
+        "keyexpr",
+        nargs="?",
+        default=None,
+        metavar="KEYEXPR",
+        help="key expression (default: <prefix>/*/fault/estimate)",
+    )
     p.add_argument("--count", type=int, metavar="N", help="exit after N samples (default: until a signal)")
     p.add_argument("--duration", type=float, metavar="S", help="exit after S seconds (default: until a signal)")
     from monitor.wire.zenoh_session import add_zenoh_arguments
@@ -39,8 +46,10 @@ def subscribe(args: argparse.Namespace) -> int:
     from monitor.wire.zenoh_session import close_quietly, config_from_args, open_session
 
     if args.zenoh_mode == "client" and not args.zenoh_connect and not args.zenoh_config:
-        raise UserError("a client needs --zenoh-connect EP (a monitor's --zenoh-listen endpoint or a router), "
-                        "or use --zenoh-mode peer")
+        raise UserError(
+            "a client needs --zenoh-connect EP (a monitor's --zenoh-listen endpoint or a router), "
+            "or use --zenoh-mode peer"
+        )
     keyexpr = args.keyexpr or f"{args.key_prefix.rstrip('/')}/*/fault/estimate"
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):

@@ -20,10 +20,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--plant", required=True, metavar="P", help="preset (paper, paper-continuous) or plant TOML file")
+    parser.add_argument(
+        "--plant", required=True, metavar="P", help="preset (paper, paper-continuous) or plant TOML file"
+    )
     parser.add_argument("--gains", required=True, metavar="GAINS.toml", help="gains file (from fault-monitor design)")
-    parser.add_argument("--disturbance-bound", required=True, type=float, metavar="D",
-                        help="the largest |d(k)| to tolerate, plant units (the paper's wind stays within 0.001)")
+    parser.add_argument(
+        "--disturbance-bound",
+        required=True,
+        type=float,
+        metavar="D",
+        help="the largest |d(k)| to tolerate, plant units (the paper's wind stays within 0.001)",
+    )
     parser.add_argument("--json", action="store_true", help='print {"threshold": ..., ...} as one JSON object')
     parser.set_defaults(func=run)
 
@@ -37,15 +44,17 @@ _PROOFS = {
 def _other(bound) -> str:
     """The per-unit figures the chosen proof beat (the invariant ellipsoid alone is the loosest)."""
     fmt = lambda x: "none" if x is None else f"{x:.6g}"
-    return (f"paths {fmt(bound.bound_paths)} (followed exactly >= {bound.path_depth} samples), blocks "
-            f"{fmt(bound.bound_blocks)} ({bound.head_terms} terms exact), ellipsoid alone {fmt(bound.ellipsoid)}")
+    return (
+        f"paths {fmt(bound.bound_paths)} (followed exactly >= {bound.path_depth} samples), blocks "
+        f"{fmt(bound.bound_blocks)} ({bound.head_terms} terms exact), ellipsoid alone {fmt(bound.ellipsoid)}"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
+    from monitor.checks.threshold import fault_threshold
     from monitor.errors import UserError
     from monitor.gains import read_gains
     from monitor.model.plant import load_plant
-    from monitor.checks.threshold import fault_threshold
 
     if not (math.isfinite(args.disturbance_bound) and args.disturbance_bound >= 0):
         raise UserError(f"--disturbance-bound must be a finite number >= 0, got {args.disturbance_bound}")
@@ -57,12 +66,18 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps({**bound.as_dict(), "plant": plant.source, "gains": str(args.gains), "unit": plant.unit}))
         return 0
     D = args.disturbance_bound
-    print(f"threshold      |f_hat| <= {bound.threshold:.6g} {plant.unit} with no fault and |d| <= {D:g}, "
-          f"for every delay sequence in [{plant.tau_min}, {plant.tau_max}] s")
+    print(
+        f"threshold      |f_hat| <= {bound.threshold:.6g} {plant.unit} with no fault and |d| <= {D:g}, "
+        f"for every delay sequence in [{plant.tau_min}, {plant.tau_max}] s"
+    )
     print(f"per unit |d|   {bound.per_unit_disturbance:.6g} by {_PROOFS[bound.method]} ({bound.seconds:.1f} s)")
     print(f"  proofs       {_other(bound)}")
-    print(f"constant delay l1 norm {bound.frozen_l1:.6g} per unit |d| at tau = {bound.tau_frozen_worst:.4f} s: "
-          f"the bound is {bound.ratio_to_frozen:.2f}x what a constant delay reaches")
-    print(f"alarm          fault-monitor run ... --alarm-threshold auto --disturbance-bound {D:g}  "
-          f"(raises at 1.25 x the bound: {1.25 * bound.threshold:.4g})")
+    print(
+        f"constant delay l1 norm {bound.frozen_l1:.6g} per unit |d| at tau = {bound.tau_frozen_worst:.4f} s: "
+        f"the bound is {bound.ratio_to_frozen:.2f}x what a constant delay reaches"
+    )
+    print(
+        f"alarm          fault-monitor run ... --alarm-threshold auto --disturbance-bound {D:g}  "
+        f"(raises at 1.25 x the bound: {1.25 * bound.threshold:.4g})"
+    )
     return 0

@@ -25,26 +25,37 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--plant", required=True, metavar="P", help="preset (paper, paper-continuous) or plant TOML file")
+    parser.add_argument(
+        "--plant", required=True, metavar="P", help="preset (paper, paper-continuous) or plant TOML file"
+    )
     parser.add_argument("--gains", metavar="GAINS.toml", help="gains file written by `fault-monitor design`")
     for name, example in (("L", "1.87,1.63"), ("M", "7.0"), ("K1", "-0.2"), ("K2", "0.7"), ("K3", "-0.1")):
-        parser.add_argument(f"--{name}", metavar="MAT", help=f"gain {name} given inline, e.g. {example} (column; rows with ';')")
-    parser.add_argument("--max-losses", type=int, default=None, metavar="N",
-                        help="also check every pattern with at most N consecutive losses (N >= 0)")
+        parser.add_argument(
+            f"--{name}", metavar="MAT", help=f"gain {name} given inline, e.g. {example} (column; rows with ';')"
+        )
+    parser.add_argument(
+        "--max-losses",
+        type=int,
+        default=None,
+        metavar="N",
+        help="also check every pattern with at most N consecutive losses (N >= 0)",
+    )
     parser.add_argument("--json", action="store_true", help="print the verdict as one JSON object")
     parser.set_defaults(func=run)
 
 
 def _inline_gains(args: argparse.Namespace, plant):
     """Gains from --L/--M/--K1 (and optional --K2/--K3, defaulting to the paper's Lemma 3 choice)."""
-    from monitor.model.closed_loop import Gains
     from monitor.design.paper import lemma3_K2_K3
     from monitor.errors import UserError
     from monitor.gains import parse_gain_matrix
+    from monitor.model.closed_loop import Gains
 
     missing = [n for n in ("L", "M", "K1") if getattr(args, n) is None]
     if missing:
-        raise UserError(f"give --gains FILE, or all of --L, --M, --K1 (missing: {', '.join('--' + m for m in missing)})")
+        raise UserError(
+            f"give --gains FILE, or all of --L, --M, --K1 (missing: {', '.join('--' + m for m in missing)})"
+        )
     K2_default, K3_default = lemma3_K2_K3(plant)
     mats = {n: parse_gain_matrix(getattr(args, n), n) for n in ("L", "M", "K1")}
     mats["K2"] = parse_gain_matrix(args.K2, "K2") if args.K2 else K2_default
@@ -54,10 +65,10 @@ def _inline_gains(args: argparse.Namespace, plant):
 
 
 def run(args: argparse.Namespace) -> int:
+    from monitor.checks.verify import verify_gains
     from monitor.errors import UserError
     from monitor.gains import read_gains
     from monitor.model.plant import load_plant
-    from monitor.checks.verify import verify_gains
 
     plant = load_plant(args.plant)
     certificate, gamma_e, gamma_z, method, warning, assumed = {}, None, None, "inline", None, []
@@ -93,18 +104,26 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         out = {k: (None if isinstance(v, float) and math.isinf(v) else v) for k, v in verdict.as_dict().items()}
         out.update(fault_time_constant=filtering, reported_error_bound=reported)
-        out.update(method=method, plant=plant.source, warning=warning, assumed=assumed,
-                   gains={n: getattr(gains, n).tolist() for n in _GAIN_NAMES})
+        out.update(
+            method=method,
+            plant=plant.source,
+            warning=warning,
+            assumed=assumed,
+            gains={n: getattr(gains, n).tolist() for n in _GAIN_NAMES},
+        )
         if losses is not None:
-            out["losses"] = {k: (None if isinstance(v, float) and math.isinf(v) else v)
-                             for k, v in losses.as_dict().items()}
+            out["losses"] = {
+                k: (None if isinstance(v, float) and math.isinf(v) else v) for k, v in losses.as_dict().items()
+            }
             out["stable_with_losses"] = bool(verdict.stable and losses.stable is True)
         print(json.dumps(out))
     else:
         _print_table(verdict, plant, method, warning, gains, assumed, losses)
         if filtering:
-            print(f"{'reported f_hat':<32} low-passed, T = {filtering:g} s: error gain <= {reported:.4f} "
-                  "(the H-inf w -> e_f bound above plus the filter's lag)")
+            print(
+                f"{'reported f_hat':<32} low-passed, T = {filtering:g} s: error gain <= {reported:.4f} "
+                "(the H-inf w -> e_f bound above plus the filter's lag)"
+            )
     ok = verdict.stable and (losses is None or losses.stable is True)
     return 0 if ok else 1
 
@@ -127,15 +146,23 @@ def _print_table(v, plant, method: str, warning: str | None, gains, assumed: lis
     rows = [
         ("plant", f"{plant.name} ({plant.source}), tau in [{plant.tau_min}, {plant.tau_max}] s"),
         ("gains", method),
-        *((f"  {n}", str(getattr(gains, n).tolist()) + ("  (assumed: Lemma 3, as printed)" if n in assumed else ""))
-          for n in _GAIN_NAMES),
+        *(
+            (f"  {n}", str(getattr(gains, n).tolist()) + ("  (assumed: Lemma 3, as printed)" if n in assumed else ""))
+            for n in _GAIN_NAMES
+        ),
         ("verdict", "STABLE for every delay in the interval" if v.stable else "UNSTABLE"),
         ("rho_max (constant tau)", f"{fmt(v.rho_max)} at tau = {v.tau_worst:.4f}"),
         ("rho, time-varying tau", fmt(v.rho_time_varying)),
-        ("H-inf w -> e_f", f"{fmt(v.hinf_ef)} (worst at tau = {v.tau_hinf_worst:.4f}; claimed {fmt(v.gamma_e_claimed)})"),
+        (
+            "H-inf w -> e_f",
+            f"{fmt(v.hinf_ef)} (worst at tau = {v.tau_hinf_worst:.4f}; claimed {fmt(v.gamma_e_claimed)})",
+        ),
         ("H-inf w -> y", f"{fmt(v.hinf_y)} (claimed {fmt(v.gamma_z_claimed)})"),
         ("steady-state |y| per unit fault", fmt(v.fault_leak)),
-        ("certificate", {True: "valid", False: "INVALID", None: "none"}[v.certificate_valid] + f": {v.certificate_detail}"),
+        (
+            "certificate",
+            {True: "valid", False: "INVALID", None: "none"}[v.certificate_valid] + f": {v.certificate_detail}",
+        ),
         ("claimed bounds hold", {True: "yes", False: "no", None: "-"}[v.bound_holds]),
     ]
     if losses is not None:

@@ -26,20 +26,21 @@ import select
 import socket
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from monitor.demo.live import Aircraft, Scenario, Daemon
+from monitor.demo.live import Aircraft, Daemon, Scenario
 from monitor.demo.methods import METHODS
 from monitor.errors import UserError
 from monitor.wire.specs import Excitation, parse_excite_spec
 
 if TYPE_CHECKING:
-    from monitor.pipelines.identify_log import IdentifiedLog
     from monitor.demo.orchestrate import Designed, DesignFn, FailedDesign, Flown, Progress
+    from monitor.pipelines.identify_log import IdentifiedLog
 
 __all__ = ["MODELS", "LATE_S", "AircraftDemoOptions", "run_aircraft_demo", "record_identification_flight"]
 
@@ -83,8 +84,9 @@ def _excitation(spec: str) -> Excitation:
     return excitation
 
 
-def record_identification_flight(aircraft: Aircraft, excite: str, seed: int, speedup: float, tlog: Path,
-                                 log_dir: Path, progress: Callable[..., None]) -> int:
+def record_identification_flight(
+    aircraft: Aircraft, excite: str, seed: int, speedup: float, tlog: Path, log_dir: Path, progress: Callable[..., None]
+) -> int:
     """Fly the manoeuvre with a real sim-vehicle and log every frame it sends; returns the records written.
 
     The demo is the ground station here: nothing answers the vehicle (the manoeuvre is open loop), and the
@@ -100,10 +102,27 @@ def record_identification_flight(aircraft: Aircraft, excite: str, seed: int, spe
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock, TlogWriter(partial) as writer:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-        sim = Daemon("sim_vehicle", ["run", *aircraft.vehicle_args(), "--excite", excite, "--steps", str(steps),
-                                      "--speedup", f"{speedup:g}", "--seed", str(seed), "--mavlink",
-                                      f"udpout:127.0.0.1:{port}", "--no-zenoh", "--log-level", "INFO"],
-                      log_dir / "identification-sim.log")
+        sim = Daemon(
+            "sim_vehicle",
+            [
+                "run",
+                *aircraft.vehicle_args(),
+                "--excite",
+                excite,
+                "--steps",
+                str(steps),
+                "--speedup",
+                f"{speedup:g}",
+                "--seed",
+                str(seed),
+                "--mavlink",
+                f"udpout:127.0.0.1:{port}",
+                "--no-zenoh",
+                "--log-level",
+                "INFO",
+            ],
+            log_dir / "identification-sim.log",
+        )
         deadline = time.monotonic() + steps / aircraft.rate / speedup + 60.0
         try:
             quiet_until = None
@@ -149,8 +168,15 @@ def _identification_log(opt: AircraftDemoOptions, progress: Progress) -> Path:
         except ValueError:
             pass
     t0 = time.monotonic()
-    records = record_identification_flight(_aircraft(opt.scenario), opt.excite, opt.scenario.seed, opt.excite_speedup,
-                                           tlog, Path(opt.out) / "logs", progress)
+    records = record_identification_flight(
+        _aircraft(opt.scenario),
+        opt.excite,
+        opt.scenario.seed,
+        opt.excite_speedup,
+        tlog,
+        Path(opt.out) / "logs",
+        progress,
+    )
     key_file.write_text(json.dumps(key, indent=2))
     progress(f"{'identification':<28} flight: {records} frames in {time.monotonic() - t0:.1f} s -> {tlog}", final=True)
     return tlog
@@ -170,8 +196,9 @@ def _identify_models(opt: AircraftDemoOptions, tlog: Path, progress: Progress) -
     return out
 
 
-def _fly(model: str, d: Designed, scenario: Scenario, trim: tuple[float, float], out: Path,
-         progress: Callable[..., None]) -> Flown:
+def _fly(
+    model: str, d: Designed, scenario: Scenario, trim: tuple[float, float], out: Path, progress: Callable[..., None]
+) -> Flown:
     """One design for one model flown live (the paper demo's ``fly_live``), its row with the late window."""
     from monitor.demo.orchestrate import fly_live
     from monitor.demo.report import late_window
@@ -179,8 +206,9 @@ def _fly(model: str, d: Designed, scenario: Scenario, trim: tuple[float, float],
 
     flown = fly_live(d, scenario, out, progress, label=f"{model}-{d.method}", trim=trim)
     flown.row.model = model
-    flown.row.ef_late, flown.row.alpha_late = late_window(flown.trace, parse_fault_spec(scenario.fault).onset,
-                                                          _aircraft(scenario).rate, LATE_S)
+    flown.row.ef_late, flown.row.alpha_late = late_window(
+        flown.trace, parse_fault_spec(scenario.fault).onset, _aircraft(scenario).rate, LATE_S
+    )
     return flown
 
 
@@ -205,8 +233,9 @@ def run_aircraft_demo(opt: AircraftDemoOptions, design: DesignFn | None = None) 
     for model, ident in identified.items():
         plant = load_plant(str(ident.plant_path))
         r = runs[model] = _ModelRuns()
-        r.designed, r.failed = design_all(opt.methods, plant, out / "gains" / model, opt.redesign, progress,
-                                          design or default_design)
+        r.designed, r.failed = design_all(
+            opt.methods, plant, out / "gains" / model, opt.redesign, progress, design or default_design
+        )
         scenario = replace(opt.scenario, plant=str(ident.plant_path))
         op = ident.result.operating_point
         trim = (op["alpha"], op["q"])
@@ -221,8 +250,9 @@ def run_aircraft_demo(opt: AircraftDemoOptions, design: DesignFn | None = None) 
     return conclude(opt.methods, primary.failed)
 
 
-def _report(opt: AircraftDemoOptions, identified: dict[str, IdentifiedLog], runs: dict[str, _ModelRuns], tlog: Path,
-            t0: float) -> None:
+def _report(
+    opt: AircraftDemoOptions, identified: dict[str, IdentifiedLog], runs: dict[str, _ModelRuns], tlog: Path, t0: float
+) -> None:
     """The table, the figures (per model, and the identification's), and summary.json."""
     from monitor.demo.orchestrate import json_default
     from monitor.demo.report import Row, format_table
@@ -230,10 +260,15 @@ def _report(opt: AircraftDemoOptions, identified: dict[str, IdentifiedLog], runs
     sc = opt.scenario
     ac = _aircraft(sc)
     out = Path(opt.out)
-    rows = [Row.failed(m, r.failed[m].note, model) if m in r.failed else r.flown[m].row
-            for model, r in runs.items() for m in opt.methods]
-    subtitle = (f"{ac.name} at {ac.airspeed:g} kt, {ac.altitude:g} ft, {ac.rate:g} Hz; fault {sc.fault}, "
-                f"delay {sc.delay} s, turbulence {ac.turbulence}, seed {sc.seed}")
+    rows = [
+        Row.failed(m, r.failed[m].note, model) if m in r.failed else r.flown[m].row
+        for model, r in runs.items()
+        for m in opt.methods
+    ]
+    subtitle = (
+        f"{ac.name} at {ac.airspeed:g} kt, {ac.altitude:g} ft, {ac.rate:g} Hz; fault {sc.fault}, "
+        f"delay {sc.delay} s, turbulence {ac.turbulence}, seed {sc.seed}"
+    )
     figures = _figures(opt, identified, runs, subtitle) if opt.figures else []
     print(f"\nJSBSim {ac.name}, live over MAVLink/UDP + Zenoh ({subtitle}; {sc.steps} samples at {sc.speedup:g}x)\n")
     for model, ident in identified.items():
@@ -243,21 +278,29 @@ def _report(opt: AircraftDemoOptions, identified: dict[str, IdentifiedLog], runs
         print(f"{model:<13} model: held-out fit {fits}; {modes}")
     print()
     print(format_table(rows, LATE_S))
-    print(f"\nSamples are h = {1 / ac.rate:g} s. |e_f| and alpha {LATE_S:g} s after: means over the second ending "
-          f"{LATE_S:g} s after onset (alpha as a deviation from trim). The short-period model (the paper's model class) "
-          "leaves out the phugoid (airspeed, pitch angle): its observer reads the aircraft's slow drift off trim as "
-          "fault. 'stable' is verify's verdict on the model; a loop with little margin there may not settle on the "
-          "aircraft, whose dynamics the model only approximates.")
+    print(
+        f"\nSamples are h = {1 / ac.rate:g} s. |e_f| and alpha {LATE_S:g} s after: means over the second ending "
+        f"{LATE_S:g} s after onset (alpha as a deviation from trim). The short-period model (the paper's model class) "
+        "leaves out the phugoid (airspeed, pitch angle): its observer reads the aircraft's slow drift off trim as "
+        "fault. 'stable' is verify's verdict on the model; a loop with little margin there may not settle on the "
+        "aircraft, whose dynamics the model only approximates."
+    )
     print(f"Identification flight: {tlog}  Plants: {', '.join(str(i.plant_path) for i in identified.values())}")
     recordings = [f.run["rrd"] for r in runs.values() for f in r.flown.values()]
     if recordings:
         print(f"Recordings: {', '.join(recordings)}")
     if figures:
         print(f"Figures:    {', '.join(figures)}")
-    summary = {"mode": "aircraft", "options": asdict(opt), "rows": [asdict(r) for r in rows],
-               "identification": {m: {"plant": str(i.plant_path), **i.report()} for m, i in identified.items()},
-               "runs": {f"{model}/{m}": f.run for model, r in runs.items() for m, f in r.flown.items()},
-               "figures": figures, "late_window_s": LATE_S, "wall_seconds": round(time.monotonic() - t0, 2)}
+    summary = {
+        "mode": "aircraft",
+        "options": asdict(opt),
+        "rows": [asdict(r) for r in rows],
+        "identification": {m: {"plant": str(i.plant_path), **i.report()} for m, i in identified.items()},
+        "runs": {f"{model}/{m}": f.run for model, r in runs.items() for m, f in r.flown.items()},
+        "figures": figures,
+        "late_window_s": LATE_S,
+        "wall_seconds": round(time.monotonic() - t0, 2),
+    }
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=json_default))
     print(f"Summary:    {out / 'summary.json'}  (total {summary['wall_seconds']:.1f} s)")
 
@@ -270,25 +313,39 @@ def _lost(flown: Flown) -> bool:
     return not row.stable or row.rms_ef is None or not row.rms_ef <= max(fault, 1e-9)
 
 
-def _figures(opt: AircraftDemoOptions, identified: dict[str, IdentifiedLog], runs: dict[str, _ModelRuns],
-             subtitle: str) -> list[str]:
+def _figures(
+    opt: AircraftDemoOptions, identified: dict[str, IdentifiedLog], runs: dict[str, _ModelRuns], subtitle: str
+) -> list[str]:
     from monitor.demo.figures import write_figures, write_identification_figure
     from monitor.wire.specs import parse_fault_spec
 
     out = Path(opt.out)
     onset = parse_fault_spec(opt.scenario.fault).onset
     h = 1 / _aircraft(opt.scenario).rate
-    paths = [write_identification_figure(
-        {m: i.result.validation_run for m, i in identified.items()},
-        {m: i.result.state_names for m, i in identified.items()},
-        {m: i.result.fit_validation for m, i in identified.items()}, out / "identification.png", subtitle)]
+    paths = [
+        write_identification_figure(
+            {m: i.result.validation_run for m, i in identified.items()},
+            {m: i.result.state_names for m, i in identified.items()},
+            {m: i.result.fit_validation for m, i in identified.items()},
+            out / "identification.png",
+            subtitle,
+        )
+    ]
     for model, r in runs.items():
         if not r.flown:
             continue
         d = out / model
         d.mkdir(parents=True, exist_ok=True)
         faint = frozenset(m for m, f in r.flown.items() if _lost(f))
-        paths += write_figures({m: f.trace for m, f in r.flown.items()}, onset, d, f"{model} model; {subtitle}",
-                               faint, failed=tuple(r.failed), h=h, paper=False,
-                               clipped_note="lost on the aircraft: clipped")
+        paths += write_figures(
+            {m: f.trace for m, f in r.flown.items()},
+            onset,
+            d,
+            f"{model} model; {subtitle}",
+            faint,
+            failed=tuple(r.failed),
+            h=h,
+            paper=False,
+            clipped_note="lost on the aircraft: clipped",
+        )
     return [str(p) for p in paths]

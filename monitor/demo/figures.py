@@ -47,9 +47,18 @@ def _limits(series: list[np.ndarray], floor: float) -> tuple[float, float]:
     return lo - pad, hi + pad
 
 
-def _panel(ax, runs: dict[str, Trace], panel: Panel, onset: int | None, title: str, unstable: frozenset[str],
-           xlabel: bool = True, failed: tuple[str, ...] = (), h: float = 1.0,
-           clipped_note: str = "unstable loop: clipped") -> None:
+def _panel(
+    ax,
+    runs: dict[str, Trace],
+    panel: Panel,
+    onset: int | None,
+    title: str,
+    unstable: frozenset[str],
+    xlabel: bool = True,
+    failed: tuple[str, ...] = (),
+    h: float = 1.0,
+    clipped_note: str = "unstable loop: clipped",
+) -> None:
     stable = [getattr(t, panel.field) for name, t in runs.items() if name not in unstable]
     # nothing stable: the fault panel keeps the true fault's scale (the estimate's question is how close to it)
     series = stable or ([] if panel.truth else [getattr(t, panel.field) for t in runs.values()])
@@ -68,18 +77,41 @@ def _panel(ax, runs: dict[str, Trace], panel: Panel, onset: int | None, title: s
         left = bool(np.any(~np.isfinite(y)) or np.any((y < lo) | (y > hi)))
         faint = name in unstable  # drawn underneath, so the stable designs stay readable
         style = look(name)
-        ax.plot(t.k, np.clip(y, lo, hi), color=style.colour, ls=style.line, lw=0.8 if faint else 1.4,
-                marker="" if faint else style.marker, ms=4, markevery=(i % every, every),
-                alpha=0.45 if faint else 1.0, zorder=1 if faint else 3,
-                label=f"{name}{f' ({clipped_note})' if left else ''}")
+        ax.plot(
+            t.k,
+            np.clip(y, lo, hi),
+            color=style.colour,
+            ls=style.line,
+            lw=0.8 if faint else 1.4,
+            marker="" if faint else style.marker,
+            ms=4,
+            markevery=(i % every, every),
+            alpha=0.45 if faint else 1.0,
+            zorder=1 if faint else 3,
+            label=f"{name}{f' ({clipped_note})' if left else ''}",
+        )
     for name in failed:
         style = look(name)
-        ax.plot([], [], color=style.colour, ls=style.line, marker=style.marker, ms=4, alpha=0.45,
-                label=f"{name} (design failed: not run)")
+        ax.plot(
+            [],
+            [],
+            color=style.colour,
+            ls=style.line,
+            marker=style.marker,
+            ms=4,
+            alpha=0.45,
+            label=f"{name} (design failed: not run)",
+        )
     if onset is not None:
         ax.axvline(onset, color="grey", ls="--", lw=1)
-        ax.annotate(f"fault onset k = {onset}", (onset, hi), xytext=(4, -14), textcoords="offset points", fontsize=8,
-                    color="grey")
+        ax.annotate(
+            f"fault onset k = {onset}",
+            (onset, hi),
+            xytext=(4, -14),
+            textcoords="offset points",
+            fontsize=8,
+            color="grey",
+        )
     ax.set_ylim(lo, hi)
     if xlabel:
         ax.set_xlabel(f"sample k (h = {h:g} s)")
@@ -87,15 +119,31 @@ def _panel(ax, runs: dict[str, Trace], panel: Panel, onset: int | None, title: s
     ax.set_title(title)
     ax.grid(alpha=0.3)
     if panel.caption:
-        ax.text(0.0, -0.2 if xlabel else -0.08, panel.caption, transform=ax.transAxes, fontsize=7.5, color="dimgrey",
-                va="top")
+        ax.text(
+            0.0,
+            -0.2 if xlabel else -0.08,
+            panel.caption,
+            transform=ax.transAxes,
+            fontsize=7.5,
+            color="dimgrey",
+            va="top",
+        )
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
 
 
-def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subtitle: str,
-                  unstable: frozenset[str] = frozenset(), q_caption: str = "", q_steady: float | None = None,
-                  failed: tuple[str, ...] = (), h: float = 1.0, paper: bool = True,
-                  clipped_note: str = "unstable loop: clipped") -> list[Path]:
+def write_figures(
+    runs: dict[str, Trace],
+    onset: int | None,
+    out_dir: Path,
+    subtitle: str,
+    unstable: frozenset[str] = frozenset(),
+    q_caption: str = "",
+    q_steady: float | None = None,
+    failed: tuple[str, ...] = (),
+    h: float = 1.0,
+    paper: bool = True,
+    clipped_note: str = "unstable loop: clipped",
+) -> list[Path]:
     """Write fig3_fault_estimate.png, fig4_alpha.png, fig5_q.png and an overview; return their paths.
 
     ``q_caption`` and ``q_steady`` (``monitor.demo.steady.q_caption``) explain Fig. 5's pitch-rate offset;
@@ -109,28 +157,58 @@ def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subt
     import matplotlib.pyplot as plt
 
     panels = [
-        Panel("fig3_fault_estimate.png", "f_hat", "elevator fault (deg)", "Fig. 3: fault estimate f_hat vs true fault",
-              truth=True),
+        Panel(
+            "fig3_fault_estimate.png",
+            "f_hat",
+            "elevator fault (deg)",
+            "Fig. 3: fault estimate f_hat vs true fault",
+            truth=True,
+        ),
         Panel("fig4_alpha.png", "alpha", "angle of attack alpha (deg)", "Fig. 4: angle of attack after the fault"),
-        Panel("fig5_q.png", "q", "pitch rate q (deg/s)", "Fig. 5: pitch rate after the fault", caption=q_caption,
-              reference=q_steady,
-              reference_label="" if q_steady is None else f"model: q with alpha held at 0 ({q_steady:.2f})"),
+        Panel(
+            "fig5_q.png",
+            "q",
+            "pitch rate q (deg/s)",
+            "Fig. 5: pitch rate after the fault",
+            caption=q_caption,
+            reference=q_steady,
+            reference_label="" if q_steady is None else f"model: q with alpha held at 0 ({q_steady:.2f})",
+        ),
     ]
     if not paper:
         panels = [replace(p, title=p.title.partition(": ")[2]) for p in panels]
     paths = []
     for panel in panels:
         fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
-        _panel(ax, runs, panel, onset, f"{panel.title}\n{subtitle}", unstable, failed=failed, h=h,
-               clipped_note=clipped_note)
+        _panel(
+            ax,
+            runs,
+            panel,
+            onset,
+            f"{panel.title}\n{subtitle}",
+            unstable,
+            failed=failed,
+            h=h,
+            clipped_note=clipped_note,
+        )
         path = out_dir / panel.file
         fig.savefig(path, bbox_inches="tight")
         plt.close(fig)
         paths.append(path)
     fig, axes = plt.subplots(len(panels), 1, figsize=(10, 10), dpi=100, sharex=True)
     for i, (ax, panel) in enumerate(zip(axes, panels)):
-        _panel(ax, runs, panel, onset, panel.title, unstable, xlabel=i == len(panels) - 1, failed=failed, h=h,
-               clipped_note=clipped_note)
+        _panel(
+            ax,
+            runs,
+            panel,
+            onset,
+            panel.title,
+            unstable,
+            xlabel=i == len(panels) - 1,
+            failed=failed,
+            h=h,
+            clipped_note=clipped_note,
+        )
     fig.suptitle(subtitle, fontsize=9)
     fig.tight_layout()
     path = out_dir / "overview.png"
@@ -140,8 +218,13 @@ def write_figures(runs: dict[str, Trace], onset: int | None, out_dir: Path, subt
     return paths
 
 
-def write_identification_figure(runs: dict[str, dict[str, np.ndarray]], names: dict[str, tuple[str, ...]],
-                                fits: dict[str, dict[str, float]], path: Path, subtitle: str) -> Path:
+def write_identification_figure(
+    runs: dict[str, dict[str, np.ndarray]],
+    names: dict[str, tuple[str, ...]],
+    fits: dict[str, dict[str, float]],
+    path: Path,
+    subtitle: str,
+) -> Path:
     """The held-out free runs of each identified model against the flight: one panel per state.
 
     ``runs`` maps a model's name to its ``validation_run`` (``t``, ``y`` measured, ``y_hat`` simulated from the
@@ -166,8 +249,14 @@ def write_identification_figure(runs: dict[str, dict[str, np.ndarray]], names: d
                 ax.plot(run["t"], run["y"][:, j], color="black", lw=1.6, label="flight (held out)")
                 drawn = True
             style = look(model)
-            ax.plot(run["t"], run["y_hat"][:, j], color=style.colour, ls=style.line, lw=1.2,
-                    label=f"{model} model, fit {fits[model][state]:.1f} %")
+            ax.plot(
+                run["t"],
+                run["y_hat"][:, j],
+                color=style.colour,
+                ls=style.line,
+                lw=1.2,
+                label=f"{model} model, fit {fits[model][state]:.1f} %",
+            )
         ax.set_ylabel(f"{state} (deviation)")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)

@@ -18,9 +18,9 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 from monitor.errors import UserError
 from monitor.process import stop_process_group, udp_port_taken
@@ -41,8 +41,18 @@ class Aircraft:
 
     def vehicle_args(self) -> list[str]:
         """sim-vehicle's flags that fly this aircraft at this condition."""
-        args = ["--aircraft", self.name, "--airspeed", f"{self.airspeed:g}", "--altitude", f"{self.altitude:g}",
-                "--rate", f"{self.rate:g}", "--turbulence", self.turbulence]
+        args = [
+            "--aircraft",
+            self.name,
+            "--airspeed",
+            f"{self.airspeed:g}",
+            "--altitude",
+            f"{self.altitude:g}",
+            "--rate",
+            f"{self.rate:g}",
+            "--turbulence",
+            self.turbulence,
+        ]
         return args + (["--aircraft-dir", self.aircraft_dir] if self.aircraft_dir else [])
 
 
@@ -94,8 +104,13 @@ def free_port(kind: int) -> int:
         return s.getsockname()[1]
 
 
-def _wait(predicate: Callable[[], bool], timeout: float, what: str, proc: subprocess.Popen | None = None,
-          log: Path | None = None) -> None:
+def _wait(
+    predicate: Callable[[], bool],
+    timeout: float,
+    what: str,
+    proc: subprocess.Popen | None = None,
+    log: Path | None = None,
+) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if predicate():
@@ -114,8 +129,14 @@ class Daemon:
         self.log = log
         self._fh = open(log, "wb")
         env = {**os.environ, "RERUN_ANALYTICS": "0"}
-        self.proc = subprocess.Popen([sys.executable, "-m", module, *args], stdout=self._fh, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, env=env, start_new_session=True)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", module, *args],
+            stdout=self._fh,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            env=env,
+            start_new_session=True,
+        )
 
     def stop(self, timeout: float = 15.0) -> int:
         code = stop_process_group(self.proc, timeout)
@@ -145,6 +166,7 @@ def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progre
                 return
             with lock:
                 into.append(payload)
+
         return on_sample
 
     # A router with both daemons as its clients: peers that only know a hub (gossip and multicast off) do not
@@ -158,19 +180,66 @@ def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progre
     t0 = time.monotonic()
     try:
         name = f"demo-{method}-{os.getpid()}"
-        monitor = Daemon("monitor", ["--log-level", "INFO", "run", "--plant", scenario.plant, "--gains", str(gains),
-                                      "--mavlink", f"udpin:127.0.0.1:{uport}", "--zenoh-connect", endpoint, "--zenoh-mode", "client",
-                                      "--rrd", str(run.rrd), "--name", name], run.log_dir / f"{method}-monitor.log")
+        monitor = Daemon(
+            "monitor",
+            [
+                "--log-level",
+                "INFO",
+                "run",
+                "--plant",
+                scenario.plant,
+                "--gains",
+                str(gains),
+                "--mavlink",
+                f"udpin:127.0.0.1:{uport}",
+                "--zenoh-connect",
+                endpoint,
+                "--zenoh-mode",
+                "client",
+                "--rrd",
+                str(run.rrd),
+                "--name",
+                name,
+            ],
+            run.log_dir / f"{method}-monitor.log",
+        )
         token = f"uav/monitor/{name}"
-        _wait(lambda: any(True for _ in session.liveliness().get(token, timeout=0.2)), 60, f"monitor '{name}' on Zenoh",
-              monitor.proc, monitor.log)
+        _wait(
+            lambda: any(True for _ in session.liveliness().get(token, timeout=0.2)),
+            60,
+            f"monitor '{name}' on Zenoh",
+            monitor.proc,
+            monitor.log,
+        )
         _wait(lambda: udp_port_taken(uport), 20, f"monitor UDP port {uport}", monitor.proc, monitor.log)
-        sim = Daemon("sim_vehicle", ["run", *scenario.vehicle_args(), "--mavlink", f"udpout:127.0.0.1:{uport}",
-                                      "--sysid", str(scenario.sysid), "--steps", str(scenario.steps),
-                                      "--speedup", str(scenario.speedup), "--fault", scenario.fault,
-                                      "--delay", scenario.delay, "--seed", str(scenario.seed),
-                                      "--zenoh-connect", endpoint, "--zenoh-mode", "client", "--log-level", "INFO"],
-                      run.log_dir / f"{method}-sim.log")
+        sim = Daemon(
+            "sim_vehicle",
+            [
+                "run",
+                *scenario.vehicle_args(),
+                "--mavlink",
+                f"udpout:127.0.0.1:{uport}",
+                "--sysid",
+                str(scenario.sysid),
+                "--steps",
+                str(scenario.steps),
+                "--speedup",
+                str(scenario.speedup),
+                "--fault",
+                scenario.fault,
+                "--delay",
+                scenario.delay,
+                "--seed",
+                str(scenario.seed),
+                "--zenoh-connect",
+                endpoint,
+                "--zenoh-mode",
+                "client",
+                "--log-level",
+                "INFO",
+            ],
+            run.log_dir / f"{method}-sim.log",
+        )
         budget = scenario.wall_budget()
         deadline = time.monotonic() + budget
         while sim.proc.poll() is None:
@@ -183,7 +252,9 @@ def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progre
         run.sim_exit = sim.stop()
         sim = None
         linger = time.monotonic() + 3.0  # let the last estimates cross Zenoh before stopping the monitor
-        while time.monotonic() < linger and not (run.estimates and run.estimates[-1].get("k", -1) >= scenario.steps - 1):
+        while time.monotonic() < linger and not (
+            run.estimates and run.estimates[-1].get("k", -1) >= scenario.steps - 1
+        ):
             time.sleep(0.05)
     finally:
         if sim is not None:
@@ -193,7 +264,9 @@ def run_live(method: str, gains: Path, scenario: Scenario, out_dir: Path, progre
         close_quietly(session, *subs)
     run.wall_seconds = time.monotonic() - t0
     if run.monitor_exit != 0:
-        raise UserError(f"fault-monitor run ({method}) exited with {run.monitor_exit}; see {run.log_dir}/{method}-monitor.log")
+        raise UserError(
+            f"fault-monitor run ({method}) exited with {run.monitor_exit}; see {run.log_dir}/{method}-monitor.log"
+        )
     if not run.rrd.exists():
         raise UserError(f"fault-monitor run ({method}) wrote no recording at {run.rrd}")
     return run

@@ -28,8 +28,12 @@ LOOKS: dict[str, Look] = {
     "paper": Look("tab:orange", "-.", "^"),
     "separate": Look("tab:red", ":", "x"),
 }
-_SPARE = (Look("tab:purple", (0, (5, 1, 1, 1)), "D"), Look("tab:brown", (0, (1, 1)), "v"),
-          Look("tab:pink", (0, (8, 2)), "P"), Look("tab:olive", (0, (3, 1, 1, 1, 1, 1)), "*"))
+_SPARE = (
+    Look("tab:purple", (0, (5, 1, 1, 1)), "D"),
+    Look("tab:brown", (0, (1, 1)), "v"),
+    Look("tab:pink", (0, (8, 2)), "P"),
+    Look("tab:olive", (0, (3, 1, 1, 1, 1, 1)), "*"),
+)
 
 
 def look(name: str) -> Look:

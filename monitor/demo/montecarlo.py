@@ -46,8 +46,16 @@ def score_run(trace: Trace, fault: FaultSchedule) -> Score:
     return score(trace, onset if onset is not None else len(trace.k), fault.f(onset) if onset is not None else 0.0)
 
 
-def run_scenario(plant: Plant, gains: Gains, steps: int, fault_spec: str, delay_spec: str, wind_spec: str,
-                 seed: int, on_sample: Callable[..., None] | None = None) -> tuple[Trace, Score]:
+def run_scenario(
+    plant: Plant,
+    gains: Gains,
+    steps: int,
+    fault_spec: str,
+    delay_spec: str,
+    wind_spec: str,
+    seed: int,
+    on_sample: Callable[..., None] | None = None,
+) -> tuple[Trace, Score]:
     """One run of the scenario given as the contract's SPECs (delay and wind drawn with ``seed``), and its score."""
     fault = parse_fault_spec(fault_spec)
     wind = parse_wind_spec(wind_spec, plant.h, seed)
@@ -55,7 +63,8 @@ def run_scenario(plant: Plant, gains: Gains, steps: int, fault_spec: str, delay_
     return trace, score_run(trace, fault)
 
 
-def monte_carlo(plant: Plant, gains: Gains, runs: int, steps: int, fault_spec: str, delay_spec: str,
-                wind_spec: str, seed: int = 0) -> list[Score]:
+def monte_carlo(
+    plant: Plant, gains: Gains, runs: int, steps: int, fault_spec: str, delay_spec: str, wind_spec: str, seed: int = 0
+) -> list[Score]:
     """``runs`` simulations with delay seeds ``seed, seed+1, ...`` (wind and fault identical)."""
     return [run_scenario(plant, gains, steps, fault_spec, delay_spec, wind_spec, seed + i)[1] for i in range(runs)]

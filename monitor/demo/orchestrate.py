@@ -14,9 +14,10 @@ import json
 import sys
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -31,8 +32,21 @@ if TYPE_CHECKING:
     from monitor.gains import GainsFile
     from monitor.model.plant import Plant
 
-__all__ = ["PRIMARY", "DemoOptions", "Designed", "FailedDesign", "Flown", "Progress", "run_demo", "design_all",
-           "default_design", "fly_live", "report_live", "conclude", "json_default"]
+__all__ = [
+    "PRIMARY",
+    "DemoOptions",
+    "Designed",
+    "FailedDesign",
+    "Flown",
+    "Progress",
+    "run_demo",
+    "design_all",
+    "default_design",
+    "fly_live",
+    "report_live",
+    "conclude",
+    "json_default",
+]
 
 PRIMARY = "certified"  # the project's own design: the demo fails when (and only when) this one cannot be designed
 
@@ -117,13 +131,17 @@ def _cached_gains(method: str, plant: Plant, path: Path) -> GainsFile | None:
         cached = read_gains(path)
     except UserError:
         return None  # unreadable cache: design again
-    current = cached.method == method and cached.meta.get("plant_hash") == plant.digest and (
-        method != "certified" or cached.meta.get("objective") == "fast")  # older files: the H-inf design
+    current = (
+        cached.method == method
+        and cached.meta.get("plant_hash") == plant.digest
+        and (method != "certified" or cached.meta.get("objective") == "fast")
+    )  # older files: the H-inf design
     return cached if current else None
 
 
-def _gains_for(method: str, plant: Plant, path: Path, redesign: bool, progress: Progress,
-               design: DesignFn) -> GainsFile | FailedDesign:
+def _gains_for(
+    method: str, plant: Plant, path: Path, redesign: bool, progress: Progress, design: DesignFn
+) -> GainsFile | FailedDesign:
     """Load the cached gains or design and write them; a design that raises a ``UserError`` is a ``FailedDesign``.
 
     Only the design call is guarded: a gains file that cannot be written is the user's to fix, not a result.
@@ -153,14 +171,18 @@ def _verified(method: str, gf: GainsFile, plant: Plant, progress: Progress) -> D
     from monitor.checks.verify import verify_gains
 
     v = verify_gains(plant, gf.gains, gf.certificate or None, gf.meta.get("gamma_e"), gf.meta.get("gamma_z"))
-    progress(f"{method:<15} verify: {'stable' if v.stable else 'UNSTABLE'} (rho_max {v.rho_max:.3f}, "
-             f"time-varying {v.rho_time_varying:.3f})", final=True)
+    progress(
+        f"{method:<15} verify: {'stable' if v.stable else 'UNSTABLE'} (rho_max {v.rho_max:.3f}, "
+        f"time-varying {v.rho_time_varying:.3f})",
+        final=True,
+    )
     certificate = {True: "valid", False: "invalid", None: "none"}[v.certificate_valid]
     return Designed(method, gf, v.stable, certificate)
 
 
-def design_all(methods: tuple[str, ...], plant: Plant, gains_dir: Path, redesign: bool, progress: Progress,
-               design: DesignFn) -> tuple[dict[str, Designed], dict[str, FailedDesign]]:
+def design_all(
+    methods: tuple[str, ...], plant: Plant, gains_dir: Path, redesign: bool, progress: Progress, design: DesignFn
+) -> tuple[dict[str, Designed], dict[str, FailedDesign]]:
     """Every requested design, verified, and the ones that could not be designed; both in ``methods``' order."""
     gains_dir.mkdir(parents=True, exist_ok=True)
     outcomes = {m: _gains_for(m, plant, gains_dir / f"{m}.toml", redesign, progress, design) for m in methods}
@@ -193,8 +215,9 @@ def run_demo(options: DemoOptions, design: DesignFn | None = None, fly: Fly | No
         raise UserError(f"the demo flies a continuous plant; '{scenario.plant}' is discrete (try paper-continuous)")
     parse_fault_spec(scenario.fault)  # fail early on a bad SPEC, before any design or daemon starts
     parse_delay_spec(scenario.delay, scenario.seed)
-    designed, failed = design_all(options.methods, plant, Path(options.out) / "gains", options.redesign, progress,
-                                  design or default_design)
+    designed, failed = design_all(
+        options.methods, plant, Path(options.out) / "gains", options.redesign, progress, design or default_design
+    )
     if options.runs:
         _monte_carlo(options, plant, designed, failed, progress, t0)
     else:
@@ -203,8 +226,14 @@ def run_demo(options: DemoOptions, design: DesignFn | None = None, fly: Fly | No
     return conclude(options.methods, failed)
 
 
-def fly_live(designed: Designed, scenario: Scenario, out: Path, progress: Callable[..., None],
-             label: str | None = None, trim: tuple[float, float] = (0.0, 0.0)) -> Flown:
+def fly_live(
+    designed: Designed,
+    scenario: Scenario,
+    out: Path,
+    progress: Callable[..., None],
+    label: str | None = None,
+    trim: tuple[float, float] = (0.0, 0.0),
+) -> Flown:
     """Fly one design with the real daemons; its row is scored from the recording, as ``replay`` would.
 
     ``label`` names the run's files (default: the method); ``trim`` (alpha0, q0) turns the recorded, absolute
@@ -216,12 +245,29 @@ def fly_live(designed: Designed, scenario: Scenario, out: Path, progress: Callab
     m = designed.method
     name = label or m
     live = run_live(name, Path(designed.gains.source), scenario, out, progress)
-    progress(f"{name:<15} live: {len(live.estimates)} estimates over Zenoh in {live.wall_seconds:.1f} s, "
-             f"recording {live.rrd}", final=True)
-    row, trace = row_from_recording(m, live.rrd, scenario.fault, designed.stable, designed.certificate,
-                                    designed.claim("gamma_e"), designed.claim("gamma_z"), trim)
-    run = {"rrd": str(live.rrd), "zenoh_estimates": len(live.estimates), "zenoh_truth": len(live.truth),
-           "wall_seconds": round(live.wall_seconds, 2), "sim_exit": live.sim_exit, "monitor_exit": live.monitor_exit}
+    progress(
+        f"{name:<15} live: {len(live.estimates)} estimates over Zenoh in {live.wall_seconds:.1f} s, "
+        f"recording {live.rrd}",
+        final=True,
+    )
+    row, trace = row_from_recording(
+        m,
+        live.rrd,
+        scenario.fault,
+        designed.stable,
+        designed.certificate,
+        designed.claim("gamma_e"),
+        designed.claim("gamma_z"),
+        trim,
+    )
+    run = {
+        "rrd": str(live.rrd),
+        "zenoh_estimates": len(live.estimates),
+        "zenoh_truth": len(live.truth),
+        "wall_seconds": round(live.wall_seconds, 2),
+        "sim_exit": live.sim_exit,
+        "monitor_exit": live.monitor_exit,
+    }
     return Flown(row, trace, run)
 
 
@@ -232,8 +278,9 @@ def _table_rows(methods: tuple[str, ...], flown: dict[str, Flown], failed: dict[
     return [Row.failed(m, failed[m].note) if m in failed else flown[m].row for m in methods]
 
 
-def _figures(opt: DemoOptions, plant: Plant, flown: dict[str, Flown], failed: dict[str, FailedDesign],
-             subtitle: str) -> list[str]:
+def _figures(
+    opt: DemoOptions, plant: Plant, flown: dict[str, Flown], failed: dict[str, FailedDesign], subtitle: str
+) -> list[str]:
     """The paper's Figs. 3-5 and the overview for the designs that ran; none when nothing ran or none were asked."""
     if not opt.figures or not flown:
         return []
@@ -254,8 +301,9 @@ def _failed_lines(failed: dict[str, FailedDesign]) -> list[str]:
     return [f"Failed:     {f.method} (no gains, no verdict, no run): {f.note}" for f in failed.values()]
 
 
-def report_live(opt: DemoOptions, plant: Plant, flown: dict[str, Flown], failed: dict[str, FailedDesign],
-                t0: float) -> dict:
+def report_live(
+    opt: DemoOptions, plant: Plant, flown: dict[str, Flown], failed: dict[str, FailedDesign], t0: float
+) -> dict:
     """Print the table, write the figures and summary.json, and return the summary (``conclude`` has the exit)."""
     from monitor.demo.report import format_table
 
@@ -265,9 +313,11 @@ def report_live(opt: DemoOptions, plant: Plant, flown: dict[str, Flown], failed:
     figures = _figures(opt, plant, flown, failed, subtitle)
     print(f"\nPaper scenario, live over MAVLink/UDP + Zenoh ({subtitle}; {sc.steps} samples at {sc.speedup:g}x)\n")
     print(format_table(rows))
-    print("\nFE settling: samples after onset until |f_hat - f| <= 5 % of the fault for good. 2 is the floor, the "
-          "earliest possible, not a limit to stay under: the fault first shows in y one sample after onset, so no "
-          "observer of form (5) settles sooner. Alarm delay: samples after onset.")
+    print(
+        "\nFE settling: samples after onset until |f_hat - f| <= 5 % of the fault for good. 2 is the floor, the "
+        "earliest possible, not a limit to stay under: the fault first shows in y one sample after onset, so no "
+        "observer of form (5) settles sooner. Alarm delay: samples after onset."
+    )
     runs = {m: f.run for m, f in flown.items()}
     recordings = [r["rrd"] for r in runs.values() if "rrd" in r]
     if recordings:
@@ -277,9 +327,14 @@ def report_live(opt: DemoOptions, plant: Plant, flown: dict[str, Flown], failed:
     for line in _failed_lines(failed):
         print(line)
     out = Path(opt.out)
-    summary = {"mode": "live", "options": asdict(opt), "rows": [asdict(r) for r in rows], "runs": runs,
-               "figures": figures,
-               "wall_seconds": round(time.monotonic() - t0, 2)}
+    summary = {
+        "mode": "live",
+        "options": asdict(opt),
+        "rows": [asdict(r) for r in rows],
+        "runs": runs,
+        "figures": figures,
+        "wall_seconds": round(time.monotonic() - t0, 2),
+    }
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=json_default))
     print(f"Summary:    {out / 'summary.json'}  (total {summary['wall_seconds']:.1f} s)")
     return summary
@@ -294,8 +349,10 @@ def conclude(methods: tuple[str, ...], failed: dict[str, FailedDesign]) -> int:
     """
     for f in failed.values():
         if f.method != PRIMARY:
-            print(f"fault-monitor demo: WARNING: the {f.method} baseline failed ({f.note}); the other designs ran",
-                  file=sys.stderr)
+            print(
+                f"fault-monitor demo: WARNING: the {f.method} baseline failed ({f.note}); the other designs ran",
+                file=sys.stderr,
+            )
     if PRIMARY in failed:
         raise failed[PRIMARY].error
     if failed and len(failed) == len(methods):
@@ -313,7 +370,9 @@ def _mc_result(opt: DemoOptions, plant: Plant, d: Designed) -> dict:
     settle = [s.settling_steps for s in scores]
     settled = [s for s in settle if s is not None]
     return {
-        "stable": d.stable, "certificate": d.certificate, "runs": opt.runs,
+        "stable": d.stable,
+        "certificate": d.certificate,
+        "runs": opt.runs,
         "settled_runs": len(settled),
         "settling_mean": float(np.mean(settled)) if settled else None,
         "settling_worst": (max(settled) if len(settled) == len(settle) else None) if settled else None,
@@ -328,12 +387,20 @@ def _mc_line(method: str, r: dict, runs: int) -> str:
         return f"{method:<15} {r['failure']}"
     mean = "-" if r["settling_mean"] is None else f"{r['settling_mean']:.2f}"
     worst = "never" if r["settling_worst"] is None else str(r["settling_worst"])
-    return (f"{method:<15} {'stable' if r['stable'] else 'UNSTABLE':<9} {r['settled_runs']:>4}/{runs:<3} {mean:>14} "
-            f"{worst:>6} {r['rms_ef_mean']:>9.3g} {r['peak_alpha_worst']:>14.3g}")
+    return (
+        f"{method:<15} {'stable' if r['stable'] else 'UNSTABLE':<9} {r['settled_runs']:>4}/{runs:<3} {mean:>14} "
+        f"{worst:>6} {r['rms_ef_mean']:>9.3g} {r['peak_alpha_worst']:>14.3g}"
+    )
 
 
-def _monte_carlo(opt: DemoOptions, plant: Plant, designed: dict[str, Designed], failed: dict[str, FailedDesign],
-                 progress: Progress, t0: float) -> None:
+def _monte_carlo(
+    opt: DemoOptions,
+    plant: Plant,
+    designed: dict[str, Designed],
+    failed: dict[str, FailedDesign],
+    progress: Progress,
+    t0: float,
+) -> None:
     """The simulation-only comparison over delay seeds, written to montecarlo.json (summary.json is left alone)."""
     sc = opt.scenario
     runs = opt.runs
@@ -346,16 +413,22 @@ def _monte_carlo(opt: DemoOptions, plant: Plant, designed: dict[str, Designed], 
         progress(f"{m:<15} Monte-Carlo: {opt.runs} runs ...")
         results[m] = _mc_result(opt, plant, designed[m])
         progress(f"{m:<15} Monte-Carlo: done", final=True)
-    print(f"\nMonte-Carlo over {opt.runs} delay seeds from {sc.seed} ({plant.name}, fault {sc.fault}, delay {sc.delay} s,"
-          f" {sc.steps} samples; simulation only)\n")
+    print(
+        f"\nMonte-Carlo over {opt.runs} delay seeds from {sc.seed} ({plant.name}, fault {sc.fault}, delay {sc.delay} s,"
+        f" {sc.steps} samples; simulation only)\n"
+    )
     head = f"{'design':<15} {'real loop':<9} {'settled':>8} {'settling mean':>14} {'worst':>6} {'RMS e_f':>9} {'worst |alpha|':>14}"
     print(head)
     print("-" * len(head))
     for m, r in results.items():
         print(_mc_line(m, r, runs))
     out = Path(opt.out)
-    summary = {"mode": "monte-carlo", "options": asdict(opt), "results": results,
-               "wall_seconds": round(time.monotonic() - t0, 2)}
+    summary = {
+        "mode": "monte-carlo",
+        "options": asdict(opt),
+        "results": results,
+        "wall_seconds": round(time.monotonic() - t0, 2),
+    }
     (out / "montecarlo.json").write_text(json.dumps(summary, indent=2, default=json_default))
     for line in _failed_lines(failed):
         print(line)

@@ -45,8 +45,9 @@ class Row:
     @classmethod
     def failed(cls, method: str, failure: str, model: str | None = None) -> Row:
         """The row of a design that never ran: its name and why, every measurement None."""
-        return cls(method, None, None, None, None, None, None, None, None, None, None, None, failure=failure,
-                   model=model)
+        return cls(
+            method, None, None, None, None, None, None, None, None, None, None, None, failure=failure, model=model
+        )
 
 
 def trace_from_recording(rrd: Path, fault_spec: str) -> tuple[Trace, dict]:
@@ -65,8 +66,10 @@ def trace_from_recording(rrd: Path, fault_spec: str) -> tuple[Trace, dict]:
     f = np.array([truth_f.get(int(kk), fault.f(int(kk))) for kk in k])
     tau_by_k = {r.k: r.tau for r in series.truth}
     trace = Trace(
-        k=k, f=f,
-        f_hat=np.array([r.f_hat[0] for r in s]), alpha=np.array([r.alpha for r in s], dtype=float),
+        k=k,
+        f=f,
+        f_hat=np.array([r.f_hat[0] for r in s]),
+        alpha=np.array([r.alpha for r in s], dtype=float),
         q=np.array([r.q for r in s], dtype=float),
         u=np.array([r.u[0] for r in s]),
         tau=np.array([tau_by_k.get(int(kk)) if tau_by_k.get(int(kk)) is not None else math.nan for kk in k]),
@@ -75,8 +78,16 @@ def trace_from_recording(rrd: Path, fault_spec: str) -> tuple[Trace, dict]:
     return trace, report
 
 
-def row_from_recording(method: str, rrd: Path, fault_spec: str, stable: bool, certificate: str,
-                       gamma_e: float, gamma_z: float, trim: tuple[float, float] = (0.0, 0.0)) -> tuple[Row, Trace]:
+def row_from_recording(
+    method: str,
+    rrd: Path,
+    fault_spec: str,
+    stable: bool,
+    certificate: str,
+    gamma_e: float,
+    gamma_z: float,
+    trim: tuple[float, float] = (0.0, 0.0),
+) -> tuple[Row, Trace]:
     """One design's row and trace from its recording; ``trim`` (alpha0, q0) is subtracted from the measured
     alpha and q, which the recording keeps as measured (absolute), so that an aircraft's row reads deviations."""
     trace, report = trace_from_recording(rrd, fault_spec)
@@ -86,16 +97,25 @@ def row_from_recording(method: str, rrd: Path, fault_spec: str, stable: bool, ce
     after = trace.k >= onset if onset is not None else np.zeros(trace.k.size, bool)
     tau = report.get("tau_true_s") or {}
     return Row(
-        method=method, stable=stable, certificate=certificate, gamma_e=gamma_e, gamma_z=gamma_z,
-        samples=report["samples"], settling_steps=report.get("settling_steps"),
+        method=method,
+        stable=stable,
+        certificate=certificate,
+        gamma_e=gamma_e,
+        gamma_z=gamma_z,
+        samples=report["samples"],
+        settling_steps=report.get("settling_steps"),
         rms_ef=report.get("rms_ef_after_onset"),
-        peak_alpha_after=metrics.peak_abs(trace.alpha[after]), rms_alpha_after=metrics.rms(trace.alpha[after]),
-        alarm_delay=report.get("detection_steps"), false_alarms=report.get("false_alarms", 0),
+        peak_alpha_after=metrics.peak_abs(trace.alpha[after]),
+        rms_alpha_after=metrics.rms(trace.alpha[after]),
+        alarm_delay=report.get("detection_steps"),
+        false_alarms=report.get("false_alarms", 0),
         tau_true_p50=tau.get("p50") if isinstance(tau, dict) else None,
     ), trace
 
 
-def late_window(trace: Trace, onset: int | None, rate: float, late_s: float = 30.0) -> tuple[float | None, float | None]:
+def late_window(
+    trace: Trace, onset: int | None, rate: float, late_s: float = 30.0
+) -> tuple[float | None, float | None]:
     """``(mean |e_f|, mean alpha)`` over the second that ends ``late_s`` after onset; None when the run is shorter.
 
     Why a late window and not the RMS after onset: a model that leaves out the phugoid estimates the fault
@@ -125,22 +145,46 @@ def _cells(r: Row, aircraft: bool) -> list[str]:
     if r.failure is not None:
         return [*first, r.failure]
     late = [_fmt(r.ef_late, ".3g", "-"), _fmt(r.alpha_late, ".3g", "-")] if aircraft else []
-    return [*first, "stable" if r.stable else "UNSTABLE", r.certificate or "none", _fmt(r.gamma_e), _fmt(r.gamma_z),
-            str(r.samples), _fmt(r.settling_steps, "d"), _fmt(r.rms_ef, ".3g"), *late, _fmt(r.peak_alpha_after, ".3g"),
-            _fmt(r.rms_alpha_after, ".3g"), _fmt(r.alarm_delay, "d"), str(r.false_alarms)]
+    return [
+        *first,
+        "stable" if r.stable else "UNSTABLE",
+        r.certificate or "none",
+        _fmt(r.gamma_e),
+        _fmt(r.gamma_z),
+        str(r.samples),
+        _fmt(r.settling_steps, "d"),
+        _fmt(r.rms_ef, ".3g"),
+        *late,
+        _fmt(r.peak_alpha_after, ".3g"),
+        _fmt(r.rms_alpha_after, ".3g"),
+        _fmt(r.alarm_delay, "d"),
+        str(r.false_alarms),
+    ]
 
 
 def format_table(rows: list[Row], late_s: float = 30.0) -> str:
     """The comparison; rows with a ``model`` (the aircraft demo) add it and the late-window columns."""
     aircraft = any(r.model for r in rows)
     late = [f"|e_f| {late_s:g} s after, deg", f"alpha {late_s:g} s after, deg"] if aircraft else []
-    head = [*(["model"] if aircraft else []), "design", "real loop", "certificate", "gamma_e", "gamma_z", "samples",
-            f"FE settling, samples (floor {SETTLING_FLOOR})", "RMS e_f after onset", *late, "peak |alpha| after, deg",
-            "RMS alpha after, deg", "alarm delay, samples", "false alarms"]
+    head = [
+        *(["model"] if aircraft else []),
+        "design",
+        "real loop",
+        "certificate",
+        "gamma_e",
+        "gamma_z",
+        "samples",
+        f"FE settling, samples (floor {SETTLING_FLOOR})",
+        "RMS e_f after onset",
+        *late,
+        "peak |alpha| after, deg",
+        "RMS alpha after, deg",
+        "alarm delay, samples",
+        "false alarms",
+    ]
     body = [_cells(r, aircraft) for r in rows]
     # a failed row's reason spans the measurement columns, so it widens none of them (only its name counts)
     named = 2 if aircraft else 1
-    widths = [max([len(h), *(len(b[i]) for b in body if len(b) == len(head) or i < named)])
-              for i, h in enumerate(head)]
+    widths = [max([len(h), *(len(b[i]) for b in body if len(b) == len(head) or i < named)]) for i, h in enumerate(head)]
     line = lambda cells: "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()  # noqa: E731
     return "\n".join([line(head), line(["-" * w for w in widths]), *(line(b) for b in body)])

@@ -23,29 +23,47 @@ SYSID = 1
 
 
 @contextmanager
-def simulated_recording(path: str | Path, plant: Plant, gains: Gains, method: str,
-                        scenario: str) -> Iterator[Callable[..., None]]:
+def simulated_recording(
+    path: str | Path, plant: Plant, gains: Gains, method: str, scenario: str
+) -> Iterator[Callable[..., None]]:
     """An ``on_sample`` callback for ``montecarlo.simulate`` that records every sample to ``path``; closed on exit."""
     from monitor import __version__
     from monitor.service.recorder import RrdRecorder
     from monitor.service.records import SampleRecord, TruthRecord
     from monitor.service.rrd_stream import recording_properties
 
-    properties = {"monitor_version": __version__, "mode": f"simulated ({scenario})",
-                  **recording_properties(plant, gains, method)}
+    properties = {
+        "monitor_version": __version__,
+        "mode": f"simulated ({scenario})",
+        **recording_properties(plant, gains, method),
+    }
     recorder = RrdRecorder(path, application_id="fault-monitor simulate", properties=properties)
 
-    def on_sample(k: int, x: np.ndarray, y: np.ndarray, step, u: np.ndarray, tau: float, f: np.ndarray,
-                  d: np.ndarray) -> None:
+    def on_sample(
+        k: int, x: np.ndarray, y: np.ndarray, step, u: np.ndarray, tau: float, f: np.ndarray, d: np.ndarray
+    ) -> None:
         t = k * plant.h
         floats = lambda a: [float(v) for v in np.ravel(a)]  # noqa: E731
-        recorder.submit(SampleRecord(sysid=SYSID, k=k, t=t, wall=t, y=floats(y), alpha=float(x[0]),
-                                     q=float(x[1]) if plant.n > 1 else 0.0, elevator=float(u[0]),
-                                     x_hat=floats(step.x_hat), f_hat=floats(step.f_hat), u=floats(u),
-                                     residual=floats(step.residual), tau_obs=float(tau), processing_s=0.0,
-                                     alarm=False))
-        recorder.submit_truth(TruthRecord(sysid=SYSID, k=k, t=t, x=floats(x), f=floats(f), d=floats(d),
-                                          tau=float(tau)))
+        recorder.submit(
+            SampleRecord(
+                sysid=SYSID,
+                k=k,
+                t=t,
+                wall=t,
+                y=floats(y),
+                alpha=float(x[0]),
+                q=float(x[1]) if plant.n > 1 else 0.0,
+                elevator=float(u[0]),
+                x_hat=floats(step.x_hat),
+                f_hat=floats(step.f_hat),
+                u=floats(u),
+                residual=floats(step.residual),
+                tau_obs=float(tau),
+                processing_s=0.0,
+                alarm=False,
+            )
+        )
+        recorder.submit_truth(TruthRecord(sysid=SYSID, k=k, t=t, x=floats(x), f=floats(f), d=floats(d), tau=float(tau)))
 
     try:
         yield on_sample

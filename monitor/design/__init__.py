@@ -8,7 +8,8 @@ objectives: ``fast`` (default, ``monitor.design.fast``) and ``hinf`` (the joint 
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # the CLI imports this module for METHODS and OBJECTIVES: no numpy, scipy or cvxpy at --help
     from monitor.design.result import DesignResult
@@ -64,10 +65,14 @@ def run_design(method: str, plant: Plant, **options: Any) -> DesignResult:
     if method == "robust-separate" and plant.lags is not None:
         from monitor.errors import UserError
 
-        raise UserError("the robust-separate method treats the delay as a B0 mismatch within one sample; this plant's "
-                        f"tau_max = {plant.tau_max:g} s reaches past h = {plant.h:g} s: use certified (the default)")
+        raise UserError(
+            "the robust-separate method treats the delay as a B0 mismatch within one sample; this plant's "
+            f"tau_max = {plant.tau_max:g} s reaches past h = {plant.h:g} s: use certified (the default)"
+        )
     if objective is not None and (method != "certified" or objective not in OBJECTIVES):
-        raise ValueError(f"objective {objective!r} applies to the certified method only (choose from {', '.join(OBJECTIVES)})")
+        raise ValueError(
+            f"objective {objective!r} applies to the certified method only (choose from {', '.join(OBJECTIVES)})"
+        )
     design: Callable[..., DesignResult]
     if method == "certified" and objective in (None, "fast"):
         from monitor.design.fast import design_fast
@@ -99,14 +104,16 @@ def run_design(method: str, plant: Plant, **options: Any) -> DesignResult:
         from monitor.design.loss_certificate import certify_losses
 
         result = certify_losses(result, plant, max_losses)
-    result.fault_time_constant = (default_fault_time_constant(plant, turbulence) if filtering is None
-                                  else (filtering or None))
+    result.fault_time_constant = (
+        default_fault_time_constant(plant, turbulence) if filtering is None else (filtering or None)
+    )
     if result.fault_time_constant:
         result.notes.append(
             f"the reported f_hat is the estimate low-passed with a {result.fault_time_constant:g}-s time constant (the "
             "loop uses the raw one, so the certificate is unchanged); its error gain is at most "
             f"{reported_error_bound(result.gamma_e, plant.h, result.fault_time_constant):.4g} (gamma_e plus the "
-            "filter's lag)")
+            "filter's lag)"
+        )
     return result
 
 
@@ -131,6 +138,9 @@ def _fast_or_hinf(plant: Plant, options: dict[str, Any]) -> DesignResult:
             result = design_certified(plant, time_budget_s=budget, **hinf_options)
         except DesignFailed as hinf_failure:
             raise DesignFailed(f"{fast_failure}; the H-infinity objective tried next: {hinf_failure}") from None
-        result.notes.insert(0, f"the fast objective failed ({fast_failure}); fell back to the H-infinity objective "
-                               f"with a {FALLBACK_BUDGET_S:g}-s budget (--objective hinf searches without one)")
+        result.notes.insert(
+            0,
+            f"the fast objective failed ({fast_failure}); fell back to the H-infinity objective "
+            f"with a {FALLBACK_BUDGET_S:g}-s budget (--objective hinf searches without one)",
+        )
         return result

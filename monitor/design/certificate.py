@@ -19,10 +19,10 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
-from monitor.model.delay_model import nominal_point
-from monitor.model.closed_loop import Gains, LoopMatrices, closed_loop, steady_state
 from monitor.design.lmi_blocks import brl_margin
 from monitor.design.solve import EPS, Solved, SolveFailed, solve_checked, value_of
+from monitor.model.closed_loop import Gains, LoopMatrices, closed_loop, steady_state
+from monitor.model.delay_model import nominal_point
 from monitor.model.plant import Plant
 
 __all__ = ["Certificate", "CertificateLMI"]
@@ -53,11 +53,13 @@ def _brl_block(X: cp.Expression, A: np.ndarray, B: np.ndarray, C: np.ndarray, g:
     """
     N, nw, k = C.shape[1], B.shape[1], C.shape[0]
     AXA, AXB, BXB = A.T @ X @ A, A.T @ X @ B, B.T @ X @ B
-    block = cp.bmat([
-        [AXA - X, AXB, C.T],
-        [AXB.T, BXB - g * np.eye(nw), np.zeros((nw, k))],
-        [C, np.zeros((k, nw)), -np.eye(k)],
-    ])
+    block = cp.bmat(
+        [
+            [AXA - X, AXB, C.T],
+            [AXB.T, BXB - g * np.eye(nw), np.zeros((nw, k))],
+            [C, np.zeros((k, nw)), -np.eye(k)],
+        ]
+    )
     constraint: cp.Constraint = 0.5 * (block + block.T) << -EPS * np.eye(N + nw + k)
     return constraint
 
@@ -76,8 +78,12 @@ class CertificateLMI:
     def __init__(self, plant: Plant, vertices: list[np.ndarray]) -> None:
         self.plant = plant
         self.vertices = vertices
-        probe = closed_loop(plant, Gains.zero(plant), nominal_point(plant),
-                            steady=(np.zeros((plant.n, plant.q)), np.zeros((plant.m, plant.q))))
+        probe = closed_loop(
+            plant,
+            Gains.zero(plant),
+            nominal_point(plant),
+            steady=(np.zeros((plant.n, plant.q)), np.zeros((plant.m, plant.q))),
+        )
         self.C_ef, self.C_y = probe.C_ef, probe.C_y
 
     def solve(self, gains: Gains) -> Certificate | None:
@@ -98,8 +104,11 @@ class CertificateLMI:
         (P, g_e, solved_e), (Q, g_z, solved_z) = parts
         solved = solved_e if solved_e.margin <= solved_z.margin else solved_z  # the tighter of the two
         if solved_e.path != solved_z.path:
-            solved = Solved(path=f"{solved_e.path} (e_f) / {solved_z.path} (y)", status=solved.status,
-                            margin=min(solved_e.margin, solved_z.margin))
+            solved = Solved(
+                path=f"{solved_e.path} (e_f) / {solved_z.path} (y)",
+                status=solved.status,
+                margin=min(solved_e.margin, solved_z.margin),
+            )
         return Certificate(gamma_e=float(np.sqrt(g_e)), gamma_z=float(np.sqrt(g_z)), P=P, Q=Q, solved=solved)
 
 
@@ -109,7 +118,9 @@ def _common_bound(loops: list[LoopMatrices], C: np.ndarray) -> tuple[np.ndarray,
     X = cp.Variable((N, N), symmetric=True)
     g = cp.Variable(nonneg=True)
     # X > 0 explicitly: the compact block alone allows an indefinite X, which would prove nothing (inertia)
-    problem = cp.Problem(cp.Minimize(g), [X >> EPS * np.eye(N)] + [_brl_block(X, loop.A, loop.B, C, g) for loop in loops])
+    problem = cp.Problem(
+        cp.Minimize(g), [X >> EPS * np.eye(N)] + [_brl_block(X, loop.A, loop.B, C, g) for loop in loops]
+    )
 
     def claim() -> float:  # what verify re-checks: the bound at every vertex with this one X
         return min(brl_margin(value_of(X), loop.A, loop.B, C, float(value_of(g))) for loop in loops)

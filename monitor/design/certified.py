@@ -30,12 +30,12 @@ import cvxpy as cp
 import numpy as np
 from scipy.optimize import minimize
 
-from monitor.model.closed_loop import Gains, closed_loop, fault_cancelling_K3, observer_indices, steady_state
-from monitor.model.delay_model import b0_polytope, nominal_point
 from monitor.design.lmi_blocks import brl_margin, hinf_slack_lmi
 from monitor.design.result import DesignResult
 from monitor.design.solve import SEARCH_PATHS, Solved, SolveFailed, solve_checked, value_of
 from monitor.errors import DesignFailed
+from monitor.model.closed_loop import Gains, closed_loop, fault_cancelling_K3, observer_indices, steady_state
+from monitor.model.delay_model import b0_polytope, nominal_point
 from monitor.model.plant import Plant
 
 __all__ = ["design_certified", "ObserverLMI"]
@@ -118,8 +118,11 @@ class ObserverLMI:
             worst = np.inf
             for v in self.vertices:
                 loop = closed_loop(plant, gains, v, steady=steady)
-                worst = min(worst, brl_margin(value_of(self.P), loop.A, loop.B, loop.C_ef, float(value_of(self.g_e))),
-                            brl_margin(value_of(self.Q), loop.A, loop.B, loop.C_y, float(value_of(self.g_z))))
+                worst = min(
+                    worst,
+                    brl_margin(value_of(self.P), loop.A, loop.B, loop.C_ef, float(value_of(self.g_e))),
+                    brl_margin(value_of(self.Q), loop.A, loop.B, loop.C_y, float(value_of(self.g_z))),
+                )
             return worst
 
         try:
@@ -186,8 +189,12 @@ def design_certified(
 
     def cost(theta: np.ndarray) -> float:
         key = tuple(np.round(theta, 10))
-        if key not in cache and time_budget_s is not None and time.perf_counter() - t0 > time_budget_s \
-                and any(c is not None for c in cache.values()):
+        if (
+            key not in cache
+            and time_budget_s is not None
+            and time.perf_counter() - t0 > time_budget_s
+            and any(c is not None for c in cache.values())
+        ):
             raise _BudgetSpent
         if key not in cache:
             K1, K2 = unpack(theta)
@@ -209,8 +216,7 @@ def design_certified(
             cost,
             theta0,
             method="Nelder-Mead",
-            options={"maxfev": max_evaluations, "xatol": 0.02, "fatol": 0.01,
-                     "initial_simplex": _simplex(theta0, 0.3)},
+            options={"maxfev": max_evaluations, "xatol": 0.02, "fatol": 0.01, "initial_simplex": _simplex(theta0, 0.3)},
         )
         x_best = result.x
         stopped = False
@@ -242,7 +248,11 @@ def design_certified(
             f"for every tau in [{plant.tau_min}, {plant.tau_max}] (exact curve, chord error bound)",
             f"K3 cancels a constant fault in steady state; weight on gamma_z^2: {weight_y}",
             f"{len(cache)} controller candidates evaluated"
-            + (f" (the search stopped at its {time_budget_s:g}-s budget with the best certified one)" if stopped else ""),
+            + (
+                f" (the search stopped at its {time_budget_s:g}-s budget with the best certified one)"
+                if stopped
+                else ""
+            ),
         ],
     )
 

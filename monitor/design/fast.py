@@ -31,14 +31,14 @@ import numpy as np
 import scipy.linalg
 from scipy.optimize import minimize
 
-from monitor.model.closed_loop import Gains, closed_loop, fault_cancelling_K3, steady_state
-from monitor.model.delay_model import b0_of_tau, b0_polytope
 from monitor.design.certificate import CertificateLMI
 from monitor.design.result import DesignResult
 from monitor.errors import DesignFailed
+from monitor.model.closed_loop import Gains, closed_loop, fault_cancelling_K3, steady_state
+from monitor.model.delay_model import b0_of_tau, b0_polytope
 from monitor.model.loss_model import macro_step_growth
-from monitor.model.plant import Plant
 from monitor.model.norms import hinf_norms
+from monitor.model.plant import Plant
 
 __all__ = ["design_fast", "deadbeat_observer", "mismatch_energy"]
 
@@ -63,7 +63,8 @@ def deadbeat_observer(plant: Plant) -> tuple[np.ndarray, np.ndarray]:
     if np.linalg.matrix_rank(CDf) < plant.q:
         raise DesignFailed(
             "the fast objective needs C*Df of full column rank (each fault seen in the output one sample "
-            "after it starts); this plant does not have it: use --objective hinf")
+            "after it starts); this plant does not have it: use --objective hinf"
+        )
     n, q, l = plant.n, plant.q, plant.l
     target = np.vstack([(plant.A + np.eye(n)) @ plant.Df, np.eye(q)])
     LM = target @ np.linalg.pinv(CDf)
@@ -165,8 +166,12 @@ def design_fast(
 
     theta0 = np.concatenate([np.zeros(m * l), 0.5 * np.eye(m).ravel()])
     simplex = [theta0] + [theta0 + 0.25 * e for e in np.eye(theta0.size)]
-    search = minimize(cost, theta0, method="Nelder-Mead",
-                      options={"maxfev": max_evaluations, "xatol": 0.005, "fatol": 1e-4, "initial_simplex": np.array(simplex)})
+    search = minimize(
+        cost,
+        theta0,
+        method="Nelder-Mead",
+        options={"maxfev": max_evaluations, "xatol": 0.005, "fatol": 1e-4, "initial_simplex": np.array(simplex)},
+    )
     t_search = time.perf_counter() - t0
     gains = gains_of(search.x)
     t1 = time.perf_counter()
@@ -180,7 +185,8 @@ def design_fast(
         raise DesignFailed(
             f"fast design: no common Lyapunov certificate over tau in [{plant.tau_min}, {plant.tau_max}] for the "
             f"controller found after {evaluations[0]} candidates (the delay interval may be too wide for this plant; "
-            "try --objective hinf)")
+            "try --objective hinf)"
+        )
     steady = steady_state(plant, gains)
     left = mismatch_energy(plant, gains, steady)
     return DesignResult(

@@ -17,8 +17,9 @@ from monitor.design.solve import EPS, most_positive_eigenvalue
 __all__ = ["hinf_slack_lmi", "brl_margin"]
 
 
-def hinf_slack_lmi(X: cp.Expression, G: cp.Expression, GA: cp.Expression, GB: cp.Expression, C: np.ndarray,
-                   g: cp.Expression | float) -> cp.Constraint:
+def hinf_slack_lmi(
+    X: cp.Expression, G: cp.Expression, GA: cp.Expression, GB: cp.Expression, C: np.ndarray, g: cp.Expression | float
+) -> cp.Constraint:
     """The constraint above, symmetrised explicitly (cvxpy wants a symmetric expression)."""
     N = C.shape[1]
     k = C.shape[0]
@@ -47,9 +48,11 @@ def brl_margin(X: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray, g: fl
     solved has margin ``>= EPS``, and stability plus the bound ``sqrt(g)`` follow from any positive margin.
     """
     nw, k = B.shape[1], C.shape[0]
-    M = np.block([
-        [A.T @ X @ A - X, A.T @ X @ B, C.T],
-        [B.T @ X @ A, B.T @ X @ B - g * np.eye(nw), np.zeros((nw, k))],
-        [C, np.zeros((k, nw)), -np.eye(k)],
-    ])
+    M = np.block(
+        [
+            [A.T @ X @ A - X, A.T @ X @ B, C.T],
+            [B.T @ X @ A, B.T @ X @ B - g * np.eye(nw), np.zeros((nw, k))],
+            [C, np.zeros((k, nw)), -np.eye(k)],
+        ]
+    )
     return min(-most_positive_eigenvalue(-X), -most_positive_eigenvalue(M))

@@ -15,14 +15,14 @@ import time
 import cvxpy as cp
 import numpy as np
 
-from monitor.model.closed_loop import Gains, steady_state
-from monitor.model.delay_model import b0_polytope
 from monitor.design.result import DesignResult
 from monitor.design.solve import EPS, SolveFailed, most_positive_eigenvalue, solve_checked, value_of
 from monitor.errors import DesignFailed
+from monitor.model.closed_loop import Gains, steady_state
+from monitor.model.delay_model import b0_polytope
 from monitor.model.loss_model import macro_steps
-from monitor.model.plant import Plant
 from monitor.model.norms import contraction
+from monitor.model.plant import Plant
 
 __all__ = ["loss_certificate", "certify_losses", "CONTRACTION"]
 
@@ -49,8 +49,10 @@ def loss_certificate(plant: Plant, gains: Gains, vertices: list[np.ndarray], max
 
     def claim() -> float:  # every macro-step contracts ||xi||_P by CONTRACTION at least, with P >= I
         candidate = value_of(P)
-        return min(min(-most_positive_eigenvalue(S.T @ candidate @ S - CONTRACTION**2 * candidate) for S in steps),
-                   -most_positive_eigenvalue(np.eye(N) - candidate) + EPS)
+        return min(
+            min(-most_positive_eigenvalue(S.T @ candidate @ S - CONTRACTION**2 * candidate) for S in steps),
+            -most_positive_eigenvalue(np.eye(N) - candidate) + EPS,
+        )
 
     try:
         solve_checked(problem, claim)
@@ -62,8 +64,11 @@ def loss_certificate(plant: Plant, gains: Gains, vertices: list[np.ndarray], max
 
 def certify_losses(result: DesignResult, plant: Plant, max_losses: int) -> DesignResult:
     """Add the loss certificate to a design's result, or fail the design (nothing is written then)."""
-    vertices = [v.reshape(plant.B0.shape) for v in result.certificate["vertices"]] if "vertices" in result.certificate \
+    vertices = (
+        [v.reshape(plant.B0.shape) for v in result.certificate["vertices"]]
+        if "vertices" in result.certificate
         else b0_polytope(plant)
+    )
     t0 = time.perf_counter()
     P = loss_certificate(plant, result.gains, vertices, max_losses)
     result.solve_seconds += time.perf_counter() - t0
@@ -72,11 +77,13 @@ def certify_losses(result: DesignResult, plant: Plant, max_losses: int) -> Desig
         raise DesignFailed(
             f"{result.method} design: no common Lyapunov certificate for up to {max_losses} consecutive lost samples "
             f"or commands over tau in [{plant.tau_min}, {plant.tau_max}] (try a smaller --max-losses; "
-            "`fault-monitor verify --max-losses N` shows which loss patterns diverge)")
-    result.certificate = {**result.certificate, "P_loss": P,
-                          "vertices": np.array([v.ravel() for v in vertices])}
+            "`fault-monitor verify --max-losses N` shows which loss patterns diverge)"
+        )
+    result.certificate = {**result.certificate, "P_loss": P, "vertices": np.array([v.ravel() for v in vertices])}
     result.max_losses = max_losses
-    result.notes.append(f"stable through up to {max_losses} consecutive lost samples or lost/late commands (any mix), "
-                        f"any delays in the interval: common Lyapunov P_loss over {len(vertices)} x "
-                        f"{2 ** (max_losses + 1) - 1} macro-steps")
+    result.notes.append(
+        f"stable through up to {max_losses} consecutive lost samples or lost/late commands (any mix), "
+        f"any delays in the interval: common Lyapunov P_loss over {len(vertices)} x "
+        f"{2 ** (max_losses + 1) - 1} macro-steps"
+    )
     return result

@@ -18,11 +18,11 @@ from typing import Any
 import cvxpy as cp
 import numpy as np
 
-from monitor.model.closed_loop import Gains
 from monitor.design.lmi_blocks import brl_margin, hinf_slack_lmi
 from monitor.design.result import DesignResult
 from monitor.design.solve import SolveFailed, solve_checked, value_of
 from monitor.errors import DesignFailed
+from monitor.model.closed_loop import Gains
 from monitor.model.plant import Plant
 
 __all__ = ["design_paper", "lemma3_K2_K3"]
@@ -85,9 +85,13 @@ def design_paper(plant: Plant, weight_y: float = 0.1, **_ignored: Any) -> Design
 
     def claim() -> float:  # model (9) with the recovered L, M, K1: stable with both bounds
         g = recovered()
-        A_bar = np.block([[A + B0 @ g.K1 @ C, Z((n, n)), Df], [Z((n, n)), A - g.L @ C, Df], [Z((q, n)), -g.M @ C, np.eye(q)]])
-        return min(brl_margin(value_of(P), A_bar, B_bar, C_f, float(value_of(g_e))),
-                   brl_margin(value_of(Q), A_bar, B_bar, C_bar, float(value_of(g_z))))
+        A_bar = np.block(
+            [[A + B0 @ g.K1 @ C, Z((n, n)), Df], [Z((n, n)), A - g.L @ C, Df], [Z((q, n)), -g.M @ C, np.eye(q)]]
+        )
+        return min(
+            brl_margin(value_of(P), A_bar, B_bar, C_f, float(value_of(g_e))),
+            brl_margin(value_of(Q), A_bar, B_bar, C_bar, float(value_of(g_z))),
+        )
 
     t_build = time.perf_counter() - t0
     ts = time.perf_counter()

@@ -6,8 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from monitor.model.closed_loop import Gains
 from monitor.design.solve import Solved
+from monitor.model.closed_loop import Gains
 
 
 @dataclass

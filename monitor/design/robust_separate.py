@@ -27,13 +27,13 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize
 
-from monitor.model.closed_loop import Gains, fault_cancelling_K3
-from monitor.model.delay_model import b0_polytope
 from monitor.design.result import DesignResult
 from monitor.design.separate import observer_alone
 from monitor.errors import DesignFailed
-from monitor.model.plant import Plant
+from monitor.model.closed_loop import Gains, fault_cancelling_K3
+from monitor.model.delay_model import b0_polytope
 from monitor.model.norms import hinf_norm
+from monitor.model.plant import Plant
 
 __all__ = ["design_robust_separate", "robust_controller_alone"]
 
@@ -41,8 +41,9 @@ OBSERVER_MISMATCH_WEIGHT = 5.0
 CONTROLLER_INCREMENT_WEIGHT = 10.0
 
 
-def _controller_loop(plant: Plant, K1: np.ndarray, K2: np.ndarray, B0_tau: np.ndarray,
-                     weight: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _controller_loop(
+    plant: Plant, K1: np.ndarray, K2: np.ndarray, B0_tau: np.ndarray, weight: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``[x; u(k-1)]`` at one delay with the fault known: A, B (from d), C (to [y; weight * increment])."""
     m, p = plant.m, plant.p
     B1_tau = plant.B0 + plant.B1 - B0_tau
@@ -52,8 +53,9 @@ def _controller_loop(plant: Plant, K1: np.ndarray, K2: np.ndarray, B0_tau: np.nd
     return A, B, C
 
 
-def robust_controller_alone(plant: Plant, vertices: list[np.ndarray], weight: float = CONTROLLER_INCREMENT_WEIGHT,
-                            max_evaluations: int = 200) -> tuple[np.ndarray, np.ndarray, float]:
+def robust_controller_alone(
+    plant: Plant, vertices: list[np.ndarray], weight: float = CONTROLLER_INCREMENT_WEIGHT, max_evaluations: int = 200
+) -> tuple[np.ndarray, np.ndarray, float]:
     """(K1, K2) minimising the worst vertex H-infinity norm described above; returns K1, K2 and that norm."""
     m, l = plant.m, plant.l
 
@@ -72,8 +74,9 @@ def robust_controller_alone(plant: Plant, vertices: list[np.ndarray], weight: fl
 
     res = minimize(cost, np.zeros(m * l + m * m), method="Nelder-Mead", options={"maxfev": max_evaluations})
     if res.fun >= 1e6:
-        raise DesignFailed("robust-separate method: no (K1, K2) stabilises every vertex of the delay polytope; "
-                           "no gains written")
+        raise DesignFailed(
+            "robust-separate method: no (K1, K2) stabilises every vertex of the delay polytope; no gains written"
+        )
     K1, K2 = unpack(res.x)
     return K1, K2, float(res.fun)
 
@@ -95,7 +98,9 @@ def design_robust_separate(plant: Plant, **_ignored: Any) -> DesignResult:
         solve_seconds=t_obs,
         total_seconds=time.perf_counter() - t0,
         bounds_apply_to="each part alone, robust over the delay polytope: observer [d; delta f; mismatch] -> e_f, "
-                        "controller d -> [y; weighted increment]; not the real loop",
-        notes=[f"observer robust to {OBSERVER_MISMATCH_WEIGHT} x (B0(tau) - B0) at {len(vertices)} vertices; controller "
-               f"increments weighted {CONTROLLER_INCREMENT_WEIGHT}; designed apart, the real loop is judged by verify"],
+        "controller d -> [y; weighted increment]; not the real loop",
+        notes=[
+            f"observer robust to {OBSERVER_MISMATCH_WEIGHT} x (B0(tau) - B0) at {len(vertices)} vertices; controller "
+            f"increments weighted {CONTROLLER_INCREMENT_WEIGHT}; designed apart, the real loop is judged by verify"
+        ],
     )

@@ -18,19 +18,20 @@ import cvxpy as cp
 import numpy as np
 from scipy.optimize import minimize
 
-from monitor.model.closed_loop import Gains, fault_cancelling_K3
 from monitor.design.lmi_blocks import brl_margin, hinf_slack_lmi
 from monitor.design.result import DesignResult
 from monitor.design.solve import Solved, SolveFailed, solve_checked, value_of
 from monitor.errors import DesignFailed
-from monitor.model.plant import Plant
+from monitor.model.closed_loop import Gains, fault_cancelling_K3
 from monitor.model.norms import hinf_norm
+from monitor.model.plant import Plant
 
 __all__ = ["design_separate", "observer_alone", "controller_alone"]
 
 
-def observer_alone(plant: Plant, extra_inputs: list[np.ndarray] | None = None,
-                   method: str = "separate") -> tuple[np.ndarray, np.ndarray, float, Solved]:
+def observer_alone(
+    plant: Plant, extra_inputs: list[np.ndarray] | None = None, method: str = "separate"
+) -> tuple[np.ndarray, np.ndarray, float, Solved]:
     """H-infinity-optimal (L, M) of the error system alone; returns L, M, gamma_e and how the LMI was solved.
 
     ``extra_inputs``: further n x k input matrices of ``e_x`` to be robust against, one LMI each with the
@@ -46,8 +47,14 @@ def observer_alone(plant: Plant, extra_inputs: list[np.ndarray] | None = None,
     G = cp.Variable((n + q, n + q))
     Y = cp.Variable((n + q, l))  # Y = G^T [L; M]
     g = cp.Variable(nonneg=True)
-    inputs = [B_o] if not extra_inputs else [np.hstack([B_o, np.vstack([E, np.zeros((q, E.shape[1]))])]) for E in extra_inputs]
-    problem = cp.Problem(cp.Minimize(g), [*(hinf_slack_lmi(X, G, G.T @ A_o - Y @ C_o, G.T @ B, C_f, g) for B in inputs)])
+    inputs = (
+        [B_o]
+        if not extra_inputs
+        else [np.hstack([B_o, np.vstack([E, np.zeros((q, E.shape[1]))])]) for E in extra_inputs]
+    )
+    problem = cp.Problem(
+        cp.Minimize(g), [*(hinf_slack_lmi(X, G, G.T @ A_o - Y @ C_o, G.T @ B, C_f, g) for B in inputs)]
+    )
 
     def recovered() -> np.ndarray:
         return np.linalg.solve(value_of(G).T, value_of(Y))
@@ -87,8 +94,12 @@ def controller_alone(plant: Plant, max_evaluations: int = 200) -> tuple[np.ndarr
             return 1e6 * radius
         return hinf_norm(A, B, C, points=512)
 
-    res = minimize(cost, np.zeros(m * l + m * m), method="Nelder-Mead",
-                   options={"maxfev": max_evaluations, "xatol": 1e-4, "fatol": 1e-6})
+    res = minimize(
+        cost,
+        np.zeros(m * l + m * m),
+        method="Nelder-Mead",
+        options={"maxfev": max_evaluations, "xatol": 1e-4, "fatol": 1e-6},
+    )
     if res.fun >= 1e6:
         raise DesignFailed("separate method: no stabilising (K1, K2) found for the nominal plant; no gains written")
     K1, K2 = unpack(res.x)
@@ -111,5 +122,7 @@ def design_separate(plant: Plant, **_ignored: Any) -> DesignResult:
         solve_seconds=t_obs,
         total_seconds=time.perf_counter() - t0,
         bounds_apply_to="each part alone at the nominal delay: observer w -> e_f, controller d -> y; not the real loop",
-        notes=["observer and controller designed apart at tau_bar, neither aware of the other nor of the delay coupling"],
+        notes=[
+            "observer and controller designed apart at tau_bar, neither aware of the other nor of the delay coupling"
+        ],
     )

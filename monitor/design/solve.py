@@ -33,8 +33,18 @@ import numpy as np
 if TYPE_CHECKING:  # cvxpy costs about a second to import: only the solves load it, not `import monitor.design`
     import cvxpy as cp
 
-__all__ = ["EPS", "CHECK_MARGIN", "PATHS", "SEARCH_PATHS", "SolvePath", "Solved", "SolveFailed", "solve_checked",
-           "most_positive_eigenvalue", "value_of"]
+__all__ = [
+    "EPS",
+    "CHECK_MARGIN",
+    "PATHS",
+    "SEARCH_PATHS",
+    "SolvePath",
+    "Solved",
+    "SolveFailed",
+    "solve_checked",
+    "most_positive_eigenvalue",
+    "value_of",
+]
 
 EPS = 1e-6  # every strict LMI F < 0 is posed as F <= -EPS I
 CHECK_MARGIN = 0.5 * EPS  # the numpy check accepts F <= -CHECK_MARGIN I: half the posed strictness, far above rounding
@@ -75,8 +85,14 @@ class SolvePath:
         variants: dict[float, cp.Problem] = problem.__dict__.setdefault("_regularised_variants", {})
         if self.regularise not in variants:
             traces = [cp.trace(v) for v in problem.variables() if v.ndim == 2 and v.is_symmetric()]
-            variants[self.regularise] = problem if not traces else cp.Problem(
-                cp.Minimize(problem.objective.expr + self.regularise * cp.sum(cp.hstack(traces))), problem.constraints)
+            variants[self.regularise] = (
+                problem
+                if not traces
+                else cp.Problem(
+                    cp.Minimize(problem.objective.expr + self.regularise * cp.sum(cp.hstack(traces))),
+                    problem.constraints,
+                )
+            )
         return variants[self.regularise]
 
 
@@ -100,8 +116,10 @@ class Solved:
     margin: float
 
     def describe(self) -> str:
-        return (f"{self.path} ({self.status}); every LMI re-checked in numpy holds with margin {self.margin:.2e} "
-                f">= {CHECK_MARGIN:.0e}")
+        return (
+            f"{self.path} ({self.status}); every LMI re-checked in numpy holds with margin {self.margin:.2e} "
+            f">= {CHECK_MARGIN:.0e}"
+        )
 
 
 def value_of(expr: cp.Expression) -> np.ndarray:
@@ -117,8 +135,13 @@ def most_positive_eigenvalue(M: np.ndarray) -> float:
     return float(np.linalg.eigvalsh(0.5 * (M + M.T))[-1])
 
 
-def solve_checked(problem: cp.Problem, claim: Callable[[], float], *, paths: tuple[SolvePath, ...] = PATHS,
-                  retry_infeasible: bool = True) -> Solved:
+def solve_checked(
+    problem: cp.Problem,
+    claim: Callable[[], float],
+    *,
+    paths: tuple[SolvePath, ...] = PATHS,
+    retry_infeasible: bool = True,
+) -> Solved:
     """Solve ``problem`` along ``paths`` until ``claim()`` holds; return how, or raise SolveFailed naming each try.
 
     ``claim()`` reads the variables' values and returns the smallest margin by which the inequalities the
@@ -147,8 +170,10 @@ def solve_checked(problem: cp.Problem, claim: Callable[[], float], *, paths: tup
         margin = _margin(claim) if value is not None and np.isfinite(value) else -np.inf
         if margin >= CHECK_MARGIN:
             return Solved(path=path.name, status=status, margin=margin)
-        tries.append(f"{path.name}: {status}" + (f", check failed (margin {margin:.1e} < {CHECK_MARGIN:.0e})"
-                                                  if np.isfinite(margin) else ""))
+        tries.append(
+            f"{path.name}: {status}"
+            + (f", check failed (margin {margin:.1e} < {CHECK_MARGIN:.0e})" if np.isfinite(margin) else "")
+        )
     raise SolveFailed("; ".join(tries))
 
 

@@ -110,8 +110,9 @@ class _Slot:
 class SampleAssembler:
     """The parts of one vehicle's samples; ``add`` and ``poll`` return the samples ready, oldest first."""
 
-    def __init__(self, signals: SignalMap, h: float, observe: bool = False, wait_s: float = 0.02,
-                 max_pending: int = 16) -> None:
+    def __init__(
+        self, signals: SignalMap, h: float, observe: bool = False, wait_s: float = 0.02, max_pending: int = 16
+    ) -> None:
         self.signals = signals
         self.h_us = h * 1e6
         self.observe = observe
@@ -236,8 +237,9 @@ class SampleAssembler:
             return None
         return self._index(self._instant_us(int(values[spec[0]]), spec[1], spec[2]))
 
-    def add(self, message: str, values: tuple, route: object, now: float,
-            max_k: int | None = None, k: int | None = None) -> list[AssembledSample]:
+    def add(
+        self, message: str, values: tuple, route: object, now: float, max_k: int | None = None, k: int | None = None
+    ) -> list[AssembledSample]:
         """File one decoded message (``values``: its unpacked payload) under its instant.
 
         ``max_k``: the newest instant the vehicle's clock can have reached; parts beyond it are refused

@@ -44,8 +44,10 @@ DATAFLASH_SYSID = 1
 _TIME_NAMES = (("TimeUS", 1), ("TimeMS", 1000))
 _TEXT_CODES = set("nNZa")  # strings and the int16[32] array: not a signal
 _CHUNK = 4096  # records read per call into pymavlink (its prints are caught around each call)
-_HINT = ("a DataFlash log names its own messages: give a signal map of them with --signals FILE (ArduPlane's "
-         "is in the README, 'MAVLink 1 and DataFlash logs')")
+_HINT = (
+    "a DataFlash log names its own messages: give a signal map of them with --signals FILE (ArduPlane's "
+    "is in the README, 'MAVLink 1 and DataFlash logs')"
+)
 
 
 def dataflash_kind(path: str | Path) -> str | None:
@@ -89,9 +91,17 @@ class DataFlashLayouts(Layouts):
             cols = tuple(fmt.columns)
             codes = [chr(c) if isinstance(c, int) else c for c in fmt.msg_fmts]
             layout = self._cache[name] = MessageLayout(
-                self._ids.get(name, 0), name, 0, struct.Struct(fmt.msg_struct), cols, {c: i for i, c in enumerate(cols)},
-                {c: 1 for c in cols}, {c: code in _TEXT_CODES for c, code in zip(cols, codes)}, dict(zip(cols, codes)),
-                _TIME_NAMES)
+                self._ids.get(name, 0),
+                name,
+                0,
+                struct.Struct(fmt.msg_struct),
+                cols,
+                {c: i for i, c in enumerate(cols)},
+                {c: 1 for c in cols},
+                {c: code in _TEXT_CODES for c, code in zip(cols, codes)},
+                dict(zip(cols, codes)),
+                _TIME_NAMES,
+            )
         return layout
 
     def unknown(self, name: str) -> str:
@@ -199,8 +209,13 @@ class DataFlashLog:
             if stamp is None:
                 continue
             fmt = self.layouts.format_of(name)
-            plan[name] = (len(layout.fields), [(layout.offsets[c], c) for c in cols if c in layout.offsets],
-                          getattr(fmt, "instance_field", None), layout.offsets[stamp[0]], stamp[1])
+            plan[name] = (
+                len(layout.fields),
+                [(layout.offsets[c], c) for c in cols if c in layout.offsets],
+                getattr(fmt, "instance_field", None),
+                layout.offsets[stamp[0]],
+                stamp[1],
+            )
         if not plan:
             return
         types = list(plan)
@@ -235,8 +250,12 @@ class DataFlashLog:
         text = self._complaints.getvalue().strip()
         if text:
             lines = text.splitlines()
-            log.warning("%s: pymavlink's DataFlash reader: %s%s", self.path, lines[0][:200],
-                        f" (and {len(lines) - 1} more lines)" if len(lines) > 1 else "")
+            log.warning(
+                "%s: pymavlink's DataFlash reader: %s%s",
+                self.path,
+                lines[0][:200],
+                f" (and {len(lines) - 1} more lines)" if len(lines) > 1 else "",
+            )
             self._complaints.seek(0)
             self._complaints.truncate()
 
@@ -251,14 +270,15 @@ def open_dataflash(path: str | Path) -> DataFlashLog:
     """Open a DataFlash log (binary or text); anything that is not one is a one-line UserError."""
     kind = dataflash_kind(path)
     if kind is None:
-        raise UserError(f"{path}: not a DataFlash log (a .bin starts with the record header 0xA3 0x95; a text "
-                        ".log holds FMT lines)")
+        raise UserError(
+            f"{path}: not a DataFlash log (a .bin starts with the record header 0xA3 0x95; a text .log holds FMT lines)"
+        )
     from pymavlink import DFReader
 
     complaints = io.StringIO()
     try:
         with _quiet_fds(complaints):
-            reader = (DFReader.DFReader_binary(str(path)) if kind == "binary" else DFReader.DFReader_text(str(path)))
+            reader = DFReader.DFReader_binary(str(path)) if kind == "binary" else DFReader.DFReader_text(str(path))
     except Exception as exc:  # pymavlink raises bare Exceptions on a damaged FMT record
         raise UserError(f"{path}: cannot read the DataFlash log: {exc}") from None
     dlog = DataFlashLog(path, kind, reader, complaints)

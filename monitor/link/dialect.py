@@ -10,14 +10,22 @@ from __future__ import annotations
 import os
 import re
 import struct
-from dataclasses import dataclass, field as dc_field
-from functools import lru_cache
+from dataclasses import dataclass
+from dataclasses import field as dc_field
+from functools import cache
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-__all__ = ["mavlink", "MessageLayout", "layout_by_id", "layout_by_name", "known_layout", "mavlink1_length",
-           "TIME_FIELDS"]
+__all__ = [
+    "mavlink",
+    "MessageLayout",
+    "layout_by_id",
+    "layout_by_name",
+    "known_layout",
+    "mavlink1_length",
+    "TIME_FIELDS",
+]
 
 # The fields that can stamp a message with its sampling instant, in order of preference, and their unit in us.
 TIME_FIELDS: tuple[tuple[str, int], ...] = (("time_usec", 1), ("time_boot_ms", 1000))
@@ -85,11 +93,20 @@ def _build(cls) -> MessageLayout:
         n = 1 if text else int(count or 1)
         offsets[name], lengths[name], is_text[name], codes[name] = flat, n, text, code
         flat += n
-    return MessageLayout(cls.id, cls.msgname, cls.crc_extra, cls.unpacker, tuple(cls.ordered_fieldnames), offsets,
-                         lengths, is_text, codes)
+    return MessageLayout(
+        cls.id,
+        cls.msgname,
+        cls.crc_extra,
+        cls.unpacker,
+        tuple(cls.ordered_fieldnames),
+        offsets,
+        lengths,
+        is_text,
+        codes,
+    )
 
 
-@lru_cache(maxsize=None)
+@cache
 def layout_by_id(msgid: int) -> MessageLayout | None:
     cls = mavlink.mavlink_map.get(msgid)
     return _build(cls) if cls is not None else None
@@ -108,7 +125,7 @@ def known_layout(name: str) -> MessageLayout:
     return layout
 
 
-@lru_cache(maxsize=None)
+@cache
 def mavlink1_length(msgid: int) -> int | None:
     """The payload length of ``msgid`` in a MAVLink 1 frame (its base fields; None if v1 cannot carry it).
 

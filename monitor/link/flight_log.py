@@ -101,9 +101,15 @@ def _spacing(stamps: list[int]) -> float | None:
     return round(slope / 1e6, 5)
 
 
-def read_flight(path: str, smap, h: float, sysid: int | None = None,
-                progress: Callable[[float, int], None] | None = None, progress_every_s: float = 2.0,
-                dataflash=None) -> FlightLog:
+def read_flight(
+    path: str,
+    smap,
+    h: float,
+    sysid: int | None = None,
+    progress: Callable[[float, int], None] | None = None,
+    progress_every_s: float = 2.0,
+    dataflash=None,
+) -> FlightLog:
     """Every sample of every vehicle (only ``sysid``'s if given), assembled as ``analyse`` assembles them.
 
     ``dataflash``: the opened DataFlash log ``path`` is: its records by name, one vehicle (sysid 1 or ``sysid``)."""

@@ -42,12 +42,14 @@ __all__ = ["RawFrame", "FrameCounters", "FrameParser", "FrameEncoder", "crc16"]
 try:
     from fastcrc.crc16 import mcrf4xx as crc16
 except ImportError:  # pymavlink's own (slower, same result)
+
     def crc16(data: Buffer, initial: int | None = None) -> int:
         crc = mavlink.x25crc()
         if initial is not None:
             crc.crc = initial
         crc.accumulate(bytes(data))
         return crc.crc
+
 
 _STX2 = 0xFD
 _STX1 = 0xFE
@@ -120,7 +122,10 @@ class FrameParser:
                 if end > n:
                     break
                 extra = self._extra(data[i + 5])
-                if extra is not None and crc16(extra, crc16(data[i + 1 : end - 2])) == data[end - 2] | data[end - 1] << 8:
+                if (
+                    extra is not None
+                    and crc16(extra, crc16(data[i + 1 : end - 2])) == data[end - 2] | data[end - 1] << 8
+                ):
                     if self.signer is not None:
                         c.v1_refused += 1
                     else:
@@ -212,8 +217,20 @@ class FrameEncoder:
             frame = _HEADER1_STRUCT.pack(_STX1, len(payload), self.seq, self.sysid, self.compid, msgid) + payload
         else:
             payload = layout.unpacker.pack(*values).rstrip(b"\x00") or b"\x00"  # MAVLink 2 truncation
-            frame = _HEADER_STRUCT.pack(_STX2, len(payload), _SIGNED if self.signer else 0, 0, self.seq, self.sysid,
-                                        self.compid, msgid & 0xFFFF, msgid >> 16) + payload
+            frame = (
+                _HEADER_STRUCT.pack(
+                    _STX2,
+                    len(payload),
+                    _SIGNED if self.signer else 0,
+                    0,
+                    self.seq,
+                    self.sysid,
+                    self.compid,
+                    msgid & 0xFFFF,
+                    msgid >> 16,
+                )
+                + payload
+            )
         frame += _CRC.pack(crc16(bytes((layout.crc_extra,)), crc16(frame[1:])))
         self.seq = (self.seq + 1) & 0xFF
         if self.signer is not None:

@@ -22,23 +22,68 @@ from typing import Any
 from monitor.link.dialect import layout_by_id, layout_by_name
 from monitor.link.frames import RawFrame
 
-__all__ = ["LogInventory", "MessageStats", "read_inventory", "SIGNAL_KINDS", "explain_missing", "why_no_samples", "field_ref"]
+__all__ = [
+    "LogInventory",
+    "MessageStats",
+    "read_inventory",
+    "SIGNAL_KINDS",
+    "explain_missing",
+    "why_no_samples",
+    "field_ref",
+]
 
 # What a signal is, and the messages (MAVLink, then DataFlash) a log may carry it in: the hint a user needs
 # to write a signal map from the log's own messages.
 SIGNAL_KINDS: dict[str, tuple[str, ...]] = {
     "angle of attack": ("AOA_SSA", "AOA"),
-    "attitude": ("ATTITUDE", "ATTITUDE_QUATERNION", "AHRS2", "AHRS3", "SIMSTATE", "SIM_STATE", "HIL_STATE",
-                 "HIL_STATE_QUATERNION", "ATT", "AHR2", "CTUN", "SIM"),
-    "body rates (gyro)": ("ATTITUDE", "RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "HIGHRES_IMU",
-                          "HIL_STATE", "RATE", "PIDP", "IMU", "GYR"),
+    "attitude": (
+        "ATTITUDE",
+        "ATTITUDE_QUATERNION",
+        "AHRS2",
+        "AHRS3",
+        "SIMSTATE",
+        "SIM_STATE",
+        "HIL_STATE",
+        "HIL_STATE_QUATERNION",
+        "ATT",
+        "AHR2",
+        "CTUN",
+        "SIM",
+    ),
+    "body rates (gyro)": (
+        "ATTITUDE",
+        "RAW_IMU",
+        "SCALED_IMU",
+        "SCALED_IMU2",
+        "SCALED_IMU3",
+        "HIGHRES_IMU",
+        "HIL_STATE",
+        "RATE",
+        "PIDP",
+        "IMU",
+        "GYR",
+    ),
     "airspeed": ("VFR_HUD", "AIRSPEED", "SCALED_PRESSURE", "HIL_STATE", "ARSP", "CTUN"),
-    "actuator output": ("ACTUATOR_OUTPUT_STATUS", "SERVO_OUTPUT_RAW", "HIL_ACTUATOR_CONTROLS", "ACTUATOR_CONTROL_TARGET",
-                        "HIL_CONTROLS", "RCOU", "CTUN"),
+    "actuator output": (
+        "ACTUATOR_OUTPUT_STATUS",
+        "SERVO_OUTPUT_RAW",
+        "HIL_ACTUATOR_CONTROLS",
+        "ACTUATOR_CONTROL_TARGET",
+        "HIL_CONTROLS",
+        "RCOU",
+        "CTUN",
+    ),
 }
-_KIND_BY_SIGNAL_NAME = {"alpha": ("angle of attack",), "aoa": ("angle of attack",), "q": ("body rates (gyro)",),
-                        "pitch_rate": ("body rates (gyro)",), "theta": ("attitude",), "pitch": ("attitude",),
-                        "airspeed": ("airspeed",), "elevator": ("actuator output",)}
+_KIND_BY_SIGNAL_NAME = {
+    "alpha": ("angle of attack",),
+    "aoa": ("angle of attack",),
+    "q": ("body rates (gyro)",),
+    "pitch_rate": ("body rates (gyro)",),
+    "theta": ("attitude",),
+    "pitch": ("attitude",),
+    "airspeed": ("airspeed",),
+    "elevator": ("actuator output",),
+}
 _LIST_MESSAGES = 12  # messages named in the human summary (the JSON has them all)
 
 
@@ -141,14 +186,26 @@ class LogInventory:
 
     def as_dict(self) -> dict[str, Any]:
         """The ``--json`` block: what the log holds."""
-        return {"kind": self.kind, "records": self.records, "frames_v1": self.frames_v1,
-                "frames_v2": self.frames_v2, "first_us": self.first_us, "last_us": self.last_us,
-                "span_s": round(self.span_s, 6),
-                "sysids": {str(s): n for s, n in self.sysids().items()},
-                "messages": [{"name": m.name, "id": m.msgid, "count": m.count,
-                              "hz": None if (hz := self.rate_hz(m.count)) is None else round(hz, 3),
-                              **({"sysids": sorted(m.sysids)} if self.kind == "tlog" else {})}
-                             for m in self.messages()]}
+        return {
+            "kind": self.kind,
+            "records": self.records,
+            "frames_v1": self.frames_v1,
+            "frames_v2": self.frames_v2,
+            "first_us": self.first_us,
+            "last_us": self.last_us,
+            "span_s": round(self.span_s, 6),
+            "sysids": {str(s): n for s, n in self.sysids().items()},
+            "messages": [
+                {
+                    "name": m.name,
+                    "id": m.msgid,
+                    "count": m.count,
+                    "hz": None if (hz := self.rate_hz(m.count)) is None else round(hz, 3),
+                    **({"sysids": sorted(m.sysids)} if self.kind == "tlog" else {}),
+                }
+                for m in self.messages()
+            ],
+        }
 
     def _with_rate(self, m: MessageStats) -> str:
         hz = self.rate_hz(m.count)
@@ -157,7 +214,9 @@ class LogInventory:
     def lines(self) -> list[str]:
         """A few lines for people: what the log is, its system ids, its messages with their rates."""
         if self.kind == "tlog":
-            what = f"{self.frames_v1 + self.frames_v2} frames (MAVLink 1: {self.frames_v1}, MAVLink 2: {self.frames_v2})"
+            what = (
+                f"{self.frames_v1 + self.frames_v2} frames (MAVLink 1: {self.frames_v1}, MAVLink 2: {self.frames_v2})"
+            )
             out = [f"{self.records} records over {self.span_s:.1f} s, {what}"]
         else:
             out = [f"{self.records} DataFlash records over {self.span_s:.1f} s of TimeUS, {len(self._counts)} messages"]
@@ -205,7 +264,8 @@ def _kinds_of(signal_name: str, message: str) -> tuple[str, ...]:
     """What a signal is: by its name when it is one of the plant's usual ones (alpha, q, theta...), else by the
     kinds its message carries."""
     return _KIND_BY_SIGNAL_NAME.get(signal_name.lower()) or tuple(
-        kind for kind, names in SIGNAL_KINDS.items() if message in names)
+        kind for kind, names in SIGNAL_KINDS.items() if message in names
+    )
 
 
 def explain_missing(inventory: LogInventory, smap, names: Sequence[str], sysid: int | None = None) -> str | None:
@@ -227,8 +287,10 @@ def explain_missing(inventory: LogInventory, smap, names: Sequence[str], sysid: 
     hints = inventory.providers(kinds, sysid) if kinds else []
     if instant_absent or any(smap.measured[n].message == smap.instant for n in absent):
         candidates = inventory.instant_candidates(sysid)
-        hints.append(f"the instant ({'TimeUS' if inventory.kind != 'tlog' else 'time_usec'}): "
-                     + (", ".join(candidates[:8]) or "none"))
+        hints.append(
+            f"the instant ({'TimeUS' if inventory.kind != 'tlog' else 'time_usec'}): "
+            + (", ".join(candidates[:8]) or "none")
+        )
     if hints:
         line += "; what the log has instead: " + "; ".join(hints)
     ids = inventory.sysids()
@@ -244,9 +306,11 @@ def why_no_samples(inventory: LogInventory, smap, names: Sequence[str], sysid: i
     if missing is not None:
         return missing
     messages = ", ".join(dict.fromkeys([smap.instant, *(smap.measured[n].message for n in names)]))
-    return (f"every message the signal map reads is in the log ({messages}), but they never made one sample at "
-            f"h = {h:g} s: their time stamps must fall within h/2 of the instant message's (the log's own "
-            "sample spacing is a good h)")
+    return (
+        f"every message the signal map reads is in the log ({messages}), but they never made one sample at "
+        f"h = {h:g} s: their time stamps must fall within h/2 of the instant message's (the log's own "
+        "sample spacing is a good h)"
+    )
 
 
 def read_inventory(path: str | Path) -> LogInventory:

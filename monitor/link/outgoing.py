@@ -15,8 +15,16 @@ from monitor.link.dialect import known_layout, mavlink
 from monitor.link.frames import FrameEncoder
 from monitor.link.signals import CommandMap
 
-__all__ = ["MONITOR_SYSID", "MONITOR_COMPONENT", "VEHICLE_COMPONENT", "command_frame", "fhat_frames",
-           "alarm_text_frame", "heartbeat_frame", "fhat_name"]
+__all__ = [
+    "MONITOR_SYSID",
+    "MONITOR_COMPONENT",
+    "VEHICLE_COMPONENT",
+    "command_frame",
+    "fhat_frames",
+    "alarm_text_frame",
+    "heartbeat_frame",
+    "fhat_name",
+]
 
 MONITOR_SYSID = 255  # a ground-station id, as MAVProxy uses; vehicles are 1-254
 MONITOR_COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
@@ -35,8 +43,14 @@ def _f32(value) -> float:
     return v if -_FLOAT32_MAX <= v <= _FLOAT32_MAX or v != v else math.copysign(math.inf, v)
 
 
-_HEARTBEAT_VALUES = (0, mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0,
-                     mavlink.MAV_STATE_ACTIVE, 3)
+_HEARTBEAT_VALUES = (
+    0,
+    mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
+    mavlink.MAV_AUTOPILOT_INVALID,
+    0,
+    mavlink.MAV_STATE_ACTIVE,
+    3,
+)
 
 
 def command_frame(enc: FrameEncoder, cmd: CommandMap, sysid: int, time_usec: int, u) -> bytes:

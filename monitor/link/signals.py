@@ -45,17 +45,29 @@ from __future__ import annotations
 import json
 import math
 import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from monitor.errors import UserError
 from monitor.link.dialect import MessageLayout, layout_by_name
 from monitor.wire.mavlink import ELEVATOR_FULL_SCALE_DEG, PITCH_CHANNEL
 from monitor.wire.telemetry import INSTANT_MESSAGE, field_of
 
-__all__ = ["Signal", "CommandMap", "SignalMap", "DEFAULT_SIGNALS_TOML", "contract_signals_toml", "default_signal_map", "parse_signals",
-           "load_signals_file", "signals_for_plant", "Layouts", "MAVLINK"]
+__all__ = [
+    "Signal",
+    "CommandMap",
+    "SignalMap",
+    "DEFAULT_SIGNALS_TOML",
+    "contract_signals_toml",
+    "default_signal_map",
+    "parse_signals",
+    "load_signals_file",
+    "signals_for_plant",
+    "Layouts",
+    "MAVLINK",
+]
 
 
 class Layouts:
@@ -78,8 +90,13 @@ class Layouts:
 
 MAVLINK = Layouts()
 
-def contract_signals_toml(measured: Sequence[str], outputs: Sequence[str] | None = None,
-                          actuator: Sequence[str] = ("elevator",), ranges: bool = True) -> str:
+
+def contract_signals_toml(
+    measured: Sequence[str],
+    outputs: Sequence[str] | None = None,
+    actuator: Sequence[str] = ("elevator",),
+    ranges: bool = True,
+) -> str:
     """A ``[signals]`` table for the quantities ``measured`` as the contract carries them.
 
     Built from ``monitor.wire.telemetry.SAMPLE_FIELDS`` and the contract's command, so the live default map,
@@ -112,8 +129,13 @@ def contract_signals_toml(measured: Sequence[str], outputs: Sequence[str] | None
         if ranges:
             parts.append(f"range = [{f.range[0]!r}, {f.range[1]!r}]")
         lines.append(f"{name} = {{ {', '.join(parts)} }}")
-    lines += ["[signals.command]", 'message = "SET_ACTUATOR_CONTROL_TARGET"', f"channels = [{PITCH_CHANNEL}]",
-              f"full_scale = [{ELEVATOR_FULL_SCALE_DEG!r}]", "group = 0"]
+    lines += [
+        "[signals.command]",
+        'message = "SET_ACTUATOR_CONTROL_TARGET"',
+        f"channels = [{PITCH_CHANNEL}]",
+        f"full_scale = [{ELEVATOR_FULL_SCALE_DEG!r}]",
+        "group = 0",
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -226,8 +248,11 @@ class SignalMap:
         return tuple(dict.fromkeys(self.measured[s].message for s in self.actuator))
 
     def describe(self) -> str:
-        outs = ", ".join(f"y{i}={self.measured[s].message}.{self.measured[s].field}"
-                         + ("" if self.measured[s].timed else " (latest value)") for i, s in enumerate(self.outputs))
+        outs = ", ".join(
+            f"y{i}={self.measured[s].message}.{self.measured[s].field}"
+            + ("" if self.measured[s].timed else " (latest value)")
+            for i, s in enumerate(self.outputs)
+        )
         return f"instant {self.instant}; {outs}"
 
 
@@ -251,7 +276,9 @@ def _field_ref(text: Any, where: str, layouts: Layouts) -> tuple[MessageLayout, 
     return layout, field, index
 
 
-def _names(raw: dict, key: str, where: str, measured: dict[str, Signal], default: list | None = None) -> tuple[str, ...]:
+def _names(
+    raw: dict, key: str, where: str, measured: dict[str, Signal], default: list | None = None
+) -> tuple[str, ...]:
     value = raw.get(key, default)
     if value is None:
         raise UserError(f"{where}: missing key '{key}'")
@@ -305,8 +332,9 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int, layouts: Lay
         hold = spec.get("hold")
         if stamp is not None:
             if hold is not None:
-                raise UserError(f"{w}: 'hold' is for a message without a time field; {layout.name} is matched by "
-                                f"its {stamp[0]}")
+                raise UserError(
+                    f"{w}: 'hold' is for a message without a time field; {layout.name} is matched by its {stamp[0]}"
+                )
             time_fields[layout.name] = (layout.position(stamp[0]), stamp[1], layout.wrap(stamp[0]))
         else:  # no time field (VFR_HUD): a latest value, sample and hold
             hold = DEFAULT_HOLD_S if hold is None else hold
@@ -315,13 +343,26 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int, layouts: Lay
             hold = float(hold)
         bounds = spec.get("range")
         if bounds is not None:
-            if (not isinstance(bounds, list) or len(bounds) != 2 or
-                    not all(isinstance(b, (int, float)) and not isinstance(b, bool) and math.isfinite(b) for b in bounds)
-                    or not bounds[0] < bounds[1]):
+            if (
+                not isinstance(bounds, list)
+                or len(bounds) != 2
+                or not all(isinstance(b, (int, float)) and not isinstance(b, bool) and math.isfinite(b) for b in bounds)
+                or not bounds[0] < bounds[1]
+            ):
                 raise UserError(f"{w}: 'range' must be [low, high] with finite low < high")
             bounds = (float(bounds[0]), float(bounds[1]))
-        measured[name] = Signal(name, layout.name, field, index, layout.position(field, index), float(scale),
-                                str(spec.get("unit", "")), float(offset), bounds, hold)
+        measured[name] = Signal(
+            name,
+            layout.name,
+            field,
+            index,
+            layout.position(field, index),
+            float(scale),
+            str(spec.get("unit", "")),
+            float(offset),
+            bounds,
+            hold,
+        )
     instant = raw.get("instant")
     instant_layout = layouts(instant) if isinstance(instant, str) else None
     if instant_layout is None:
@@ -332,14 +373,18 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int, layouts: Lay
     time_fields[instant_layout.name] = (instant_layout.position(stamp[0]), 1, instant_layout.wrap(stamp[0]))
     outs = _names(raw, "outputs", where, measured)
     if len(outs) != outputs:
-        raise UserError(f"{where}: 'outputs' names {len(outs)} signal(s) but the plant has {outputs} output(s) (rows of C)")
+        raise UserError(
+            f"{where}: 'outputs' names {len(outs)} signal(s) but the plant has {outputs} output(s) (rows of C)"
+        )
     act = _names(raw, "actuator", where, measured)
     if len(act) != inputs:
         raise UserError(f"{where}: 'actuator' names {len(act)} signal(s) but the plant has {inputs} input(s)")
     for name in act:
         if not measured[name].timed:
-            raise UserError(f"{where}: actuator '{name}': {measured[name].message} has no time_usec or time_boot_ms, "
-                            "and the actuator report must be matched to its instant")
+            raise UserError(
+                f"{where}: actuator '{name}': {measured[name].message} has no time_usec or time_boot_ms, "
+                "and the actuator report must be matched to its instant"
+            )
     op = _operating_point(raw.get("operating_point"), where, measured, outs, act)
     record = _names(raw, "record", where, measured, default=list(measured))
     cmd = raw.get("command", {})
@@ -361,12 +406,22 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int, layouts: Lay
     group = cmd.get("group", 0)
     if isinstance(group, bool) or not isinstance(group, int) or not 0 <= group <= 255:
         raise UserError(f"{where} command: group must be an integer 0-255")
-    return SignalMap(instant_layout.name, measured, outs, act, record, CommandMap(message, channels, full_scale, group),
-                     time_fields, source, op)
+    return SignalMap(
+        instant_layout.name,
+        measured,
+        outs,
+        act,
+        record,
+        CommandMap(message, channels, full_scale, group),
+        time_fields,
+        source,
+        op,
+    )
 
 
-def _operating_point(raw: Any, where: str, measured: dict[str, Signal], outs: tuple[str, ...],
-                     act: tuple[str, ...]) -> dict[str, float] | None:
+def _operating_point(
+    raw: Any, where: str, measured: dict[str, Signal], outs: tuple[str, ...], act: tuple[str, ...]
+) -> dict[str, float] | None:
     """``operating_point = { name = value, ... }``: every output and actuator signal, each a finite number."""
     if raw is None:
         return None
@@ -378,12 +433,15 @@ def _operating_point(raw: Any, where: str, measured: dict[str, Signal], outs: tu
         if name not in measured:
             raise UserError(f"{w}: names '{name}', which is not in [signals.measured]")
         if name not in wanted:
-            raise UserError(f"{w}: names '{name}', which is not an output or actuator signal "
-                            f"(give: {', '.join(wanted)})")
+            raise UserError(
+                f"{w}: names '{name}', which is not an output or actuator signal (give: {', '.join(wanted)})"
+            )
     missing = [name for name in wanted if name not in raw]
     if missing:
-        raise UserError(f"{w}: missing {', '.join(repr(n) for n in missing)} (it must name every output and "
-                        f"actuator signal: {', '.join(wanted)})")
+        raise UserError(
+            f"{w}: missing {', '.join(repr(n) for n in missing)} (it must name every output and "
+            f"actuator signal: {', '.join(wanted)})"
+        )
     op: dict[str, float] = {}
     for name in wanted:
         value = raw[name]
@@ -426,6 +484,8 @@ def signals_for_plant(plant, signals_file: str | Path | None = None, layouts: La
     if reason is not None:
         raise UserError(f"plant {plant.name} has no [signals] table: {reason}")
     if plant.l != 1 or plant.m != 1:
-        raise UserError(f"plant {plant.name}: has {plant.l} output(s) and {plant.m} input(s); the default signal map "
-                        "is for 1 and 1 (alpha, elevator): give a [signals] table or --signals FILE")
+        raise UserError(
+            f"plant {plant.name}: has {plant.l} output(s) and {plant.m} input(s); the default signal map "
+            "is for 1 and 1 (alpha, elevator): give a [signals] table or --signals FILE"
+        )
     return default_signal_map()

@@ -92,7 +92,7 @@ class TlogWriter:
     def close(self) -> None:
         self._fh.close()
 
-    def __enter__(self) -> "TlogWriter":
+    def __enter__(self) -> TlogWriter:
         return self
 
     def __exit__(self, *exc) -> None:

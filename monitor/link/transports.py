@@ -68,8 +68,10 @@ def parse_connection(text: str, allow_remote: bool = True) -> ConnectionSpec:
     host, _, port = rest.rpartition(":")
     host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
     if kind not in KINDS or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
-        raise UserError(f"--mavlink '{text}': expected udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or "
-                        "tcpin:HOST:PORT (e.g. udpin:127.0.0.1:14550)")
+        raise UserError(
+            f"--mavlink '{text}': expected udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or "
+            "tcpin:HOST:PORT (e.g. udpin:127.0.0.1:14550)"
+        )
     if kind in ("udpout", "tcp") and int(port) == 0:
         raise UserError(f"--mavlink '{text}': {kind} needs the peer's port, not 0")
     return ConnectionSpec(kind, host, int(port))
@@ -78,8 +80,9 @@ def parse_connection(text: str, allow_remote: bool = True) -> ConnectionSpec:
 def resolve(spec: ConnectionSpec) -> tuple[str, int]:
     """The address to bind or reach; an unresolvable host is a one-line UserError."""
     try:
-        infos = socket.getaddrinfo(spec.host, spec.port, type=socket.SOCK_DGRAM if spec.kind.startswith("udp")
-                                   else socket.SOCK_STREAM)
+        infos = socket.getaddrinfo(
+            spec.host, spec.port, type=socket.SOCK_DGRAM if spec.kind.startswith("udp") else socket.SOCK_STREAM
+        )
     except socket.gaierror as exc:
         raise UserError(f"--mavlink {spec}: cannot resolve host '{spec.host}' ({exc.strerror or exc})") from None
     except UnicodeError as exc:  # a label IDNA cannot encode (empty, over 63 characters): no strerror
@@ -116,8 +119,9 @@ class Link:
 
     datagram = False  # datagram links get the per-datagram caps (monitor/service/pipeline.py)
 
-    def __init__(self, spec: ConnectionSpec, index: int, handler: FrameHandler, counters: FrameCounters,
-                 signer: Signer | None) -> None:
+    def __init__(
+        self, spec: ConnectionSpec, index: int, handler: FrameHandler, counters: FrameCounters, signer: Signer | None
+    ) -> None:
         self.spec = spec
         self.index = index
         self.handler = handler
@@ -282,7 +286,7 @@ class _Connection(asyncio.Protocol):
 
     per_pass = 256
 
-    def __init__(self, link: "TcpLink") -> None:
+    def __init__(self, link: TcpLink) -> None:
         self.link = link
         self.parser = link.new_parser(stream=True)
         self._backlog: list[RawFrame] = []
@@ -392,7 +396,8 @@ class TcpLink(Link):
                 conn.transport.close()
 
 
-def open_link(spec: ConnectionSpec, index: int, handler: FrameHandler, counters: FrameCounters,
-              signer: Signer | None) -> Link:
+def open_link(
+    spec: ConnectionSpec, index: int, handler: FrameHandler, counters: FrameCounters, signer: Signer | None
+) -> Link:
     cls = UdpLink if spec.kind.startswith("udp") else TcpLink
     return cls(spec, index, handler, counters, signer)

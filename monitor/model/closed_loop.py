@@ -51,7 +51,9 @@ class Gains:
         for name, shape in expected.items():
             actual = getattr(self, name).shape
             if actual != shape:
-                raise ValueError(f"gain {name} must be {shape[0]}x{shape[1]} for this plant, got {actual[0]}x{actual[1]}")
+                raise ValueError(
+                    f"gain {name} must be {shape[0]}x{shape[1]} for this plant, got {actual[0]}x{actual[1]}"
+                )
 
 
 @dataclass(frozen=True)
@@ -102,7 +104,9 @@ def observer_indices(plant: Plant) -> tuple[slice, slice, slice, slice]:
     return slice(0, n), slice(n, 2 * n), slice(2 * n, 2 * n + q), slice(2 * n + q, 2 * n + q + m)
 
 
-def closed_loop(plant: Plant, gains: Gains, B0_tau: np.ndarray, steady: tuple[np.ndarray, np.ndarray] | None = None) -> LoopMatrices:
+def closed_loop(
+    plant: Plant, gains: Gains, B0_tau: np.ndarray, steady: tuple[np.ndarray, np.ndarray] | None = None
+) -> LoopMatrices:
     """The closed loop at one uncertain point ``B0_tau`` (observer uses the nominal ``A, B0, B1``).
 
     The point is ``B0(tau)`` for an ordinary plant and the stack of curve values of a delay past one sample

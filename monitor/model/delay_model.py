@@ -26,8 +26,18 @@ from monitor.model.discretize import F_of_tau, b0_b1, delta_exact, delta_lemma1,
 from monitor.model.long_delay import curve_of, lag_intervals, lag_point, lag_realization
 from monitor.model.plant import ContinuousModel, Plant
 
-__all__ = ["b0_of_tau", "tau_grid", "b0_polytope", "curve_model", "input_sum", "delta_summary", "lag_curve",
-           "realization", "point_size", "nominal_point"]
+__all__ = [
+    "b0_of_tau",
+    "tau_grid",
+    "b0_polytope",
+    "curve_model",
+    "input_sum",
+    "delta_summary",
+    "lag_curve",
+    "realization",
+    "point_size",
+    "nominal_point",
+]
 
 
 def input_sum(plant: Plant) -> np.ndarray:
@@ -76,8 +86,10 @@ def realization(plant: Plant, point: np.ndarray) -> tuple[np.ndarray, np.ndarray
         return plant.A, point, input_sum(plant) - point
     lags = plant.lags
     if point.shape != (point_size(plant) // plant.m, plant.m):
-        raise ValueError(f"an uncertain point of this lagged plant is {point_size(plant) // plant.m} x {plant.m}, "
-                         f"got {point.shape[0]} x {point.shape[1]}")
+        raise ValueError(
+            f"an uncertain point of this lagged plant is {point_size(plant) // plant.m} x {plant.m}, "
+            f"got {point.shape[0]} x {point.shape[1]}"
+        )
     return lag_realization(point, lags.base.A, _whole_interval(lags.base), lags.first, lags.last)
 
 
@@ -138,18 +150,27 @@ def b0_polytope(plant: Plant, segments: int = 8) -> list[np.ndarray]:
     if plant.lags is None:
         model = curve_model(plant)
         B = model.B_c if plant.continuous is not None else _E(plant)
-        return _curve_polytope(plant, lambda t: b0_of_tau(plant, t), plant.tau_min, plant.tau_max, model.A_c, B,
-                               segments)
+        return _curve_polytope(
+            plant, lambda t: b0_of_tau(plant, t), plant.tau_min, plant.tau_max, model.A_c, B, segments
+        )
     base = plant.lags.base
     model, curve = curve_model(base), lag_curve(base)
-    parts = [_curve_polytope(base, curve, lo, hi, model.A_c, model.B_c, segments)
-             for lo, hi in lag_intervals(plant.h, plant.tau_min, plant.tau_max)]
+    parts = [
+        _curve_polytope(base, curve, lo, hi, model.A_c, model.B_c, segments)
+        for lo, hi in lag_intervals(plant.h, plant.tau_min, plant.tau_max)
+    ]
     return [np.vstack(choice) for choice in itertools.product(*parts)]
 
 
-def _curve_polytope(plant: Plant, curve: Callable[[float], np.ndarray], lo: float, hi: float, A_c: np.ndarray,
-                    B: np.ndarray,
-                    segments: int) -> list[np.ndarray]:
+def _curve_polytope(
+    plant: Plant,
+    curve: Callable[[float], np.ndarray],
+    lo: float,
+    hi: float,
+    A_c: np.ndarray,
+    B: np.ndarray,
+    segments: int,
+) -> list[np.ndarray]:
     """The vertices for ``curve`` (``B0`` of a delay) over ``[lo, hi]``: chords blown up by their error bound."""
     taus = np.linspace(lo, hi, segments + 1)
     points = [curve(float(t)).ravel() for t in taus]

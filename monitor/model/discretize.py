@@ -22,7 +22,6 @@ from scipy.optimize import minimize_scalar
 
 from monitor.errors import UserError
 
-
 __all__ = [
     "ContinuousModel",
     "Discrete",
@@ -122,8 +121,9 @@ def delta_exact(model: ContinuousModel, h: float, tau_min: float, tau_max: float
     return max(values[i], -float(res.fun))
 
 
-def reconstruct_continuous(A: np.ndarray, Bsum: np.ndarray, Df: np.ndarray, Dd: np.ndarray,
-                           h: float) -> ContinuousModel:
+def reconstruct_continuous(
+    A: np.ndarray, Bsum: np.ndarray, Df: np.ndarray, Dd: np.ndarray, h: float
+) -> ContinuousModel:
     """The continuous plant behind discrete matrices: ``A_c = logm(A)/h``, inputs from ``Gamma(h)^-1``.
 
     ``Bsum = B0 + B1`` is the zero-delay input matrix. Fails with a UserError when ``A`` has no real

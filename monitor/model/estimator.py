@@ -99,8 +99,15 @@ class Estimator:
     overhead is most of the cost; plain floats take a third of the time (benchmarks/bench_monitor.py).
     """
 
-    def __init__(self, plant: Plant, gains: Gains, max_gap: int = 50, u_limit: float | None = None,
-                 u0: ArrayLike | None = None, fault_time_constant: float | None = None) -> None:
+    def __init__(
+        self,
+        plant: Plant,
+        gains: Gains,
+        max_gap: int = 50,
+        u_limit: float | None = None,
+        u0: ArrayLike | None = None,
+        fault_time_constant: float | None = None,
+    ) -> None:
         """``u0``: the operating point of the inputs when the plant works in deviations (``u`` here is
         ``u_abs - u0``): the actuator limit holds for the absolute deflection, so ``u`` is saturated to
         ``[-limit - u0, limit - u0]``. None: zero. ``fault_time_constant``: seconds of the low-pass on the
@@ -115,11 +122,13 @@ class Estimator:
         A, B0, B1, C, Df = plant.A, plant.B0, plant.B1, plant.C, plant.Df
         n, q, m, l = plant.n, plant.q, plant.m, plant.l
         self._U = np.hstack([np.zeros((m, n)), gains.K3, gains.K2, gains.K1])
-        self._O = np.vstack([
-            np.hstack([A - gains.L @ C, Df, B1, gains.L, B0]),
-            np.hstack([-gains.M @ C, np.eye(q), np.zeros((q, m)), gains.M, np.zeros((q, m))]),
-            np.hstack([-C, np.zeros((l, q)), np.zeros((l, m)), np.eye(l), np.zeros((l, m))]),
-        ])
+        self._O = np.vstack(
+            [
+                np.hstack([A - gains.L @ C, Df, B1, gains.L, B0]),
+                np.hstack([-gains.M @ C, np.eye(q), np.zeros((q, m)), gains.M, np.zeros((q, m))]),
+                np.hstack([-C, np.zeros((l, q)), np.zeros((l, m)), np.eye(l), np.zeros((l, m))]),
+            ]
+        )
         N = n + q + m
         predict = np.eye(N)  # a lost sample: no innovation, the actuator held u(k-1)
         predict[:n, :n] = A
@@ -133,7 +142,7 @@ class Estimator:
         self._O_rows = self._O.tolist()
         self._lim = float(self.u_limit) if self.u_limit is not None else None
         # per input: the saturation bounds in deviation coordinates
-        self._bounds = ([(-self._lim - c, self._lim - c) for c in self.u0] if self._lim is not None else None)
+        self._bounds = [(-self._lim - c, self._lim - c) for c in self.u0] if self._lim is not None else None
 
     def initial_state(self) -> EstimatorState:
         p = self.plant
@@ -147,8 +156,9 @@ class Estimator:
         clipped: np.ndarray = np.clip(np.asarray(u, dtype=float), lo, hi)
         return clipped
 
-    def _advance(self, s: EstimatorState, k: int, u_prev: Iterable[float] | None,
-                 applied: bool | None = None) -> list[float]:
+    def _advance(
+        self, s: EstimatorState, k: int, u_prev: Iterable[float] | None, applied: bool | None = None
+    ) -> list[float]:
         """Predict over lost samples up to k, put the reported u(k-1) in; returns z as a list of floats.
 
         ``applied is False`` (the vehicle reports that the command for k-1 never acted): the last step
@@ -205,11 +215,24 @@ class Estimator:
             keep = self._keep
             previous = s.f_reported if s.f_reported is not None and not reset else [0.0] * len(f_hat)
             f_hat = s.f_reported = [keep * p + (1.0 - keep) * f for p, f in zip(previous, f_hat)]
-        return StepResult(k=k, u=np.array(u), x_hat=np.array(v[:self._n_reported]), f_hat=np.array(f_hat),
-                          residual=np.array(out[nq:]), skipped=self._skipped, reset=reset)
+        return StepResult(
+            k=k,
+            u=np.array(u),
+            x_hat=np.array(v[: self._n_reported]),
+            f_hat=np.array(f_hat),
+            residual=np.array(out[nq:]),
+            skipped=self._skipped,
+            reset=reset,
+        )
 
-    def step(self, s: EstimatorState, k: int, y: ArrayLike, u_prev: Iterable[float] | None = None,
-             applied: bool | None = None) -> StepResult:
+    def step(
+        self,
+        s: EstimatorState,
+        k: int,
+        y: ArrayLike,
+        u_prev: Iterable[float] | None = None,
+        applied: bool | None = None,
+    ) -> StepResult:
         """Process sample k in place and return the command. Raises ValueError for a stale or duplicate k.
 
         ``u_prev``: the deflection the vehicle reports at k (None: the estimator's own last command);
@@ -222,8 +245,9 @@ class Estimator:
             u = [hi if e > hi else lo if e < lo else e for e, (lo, hi) in zip(u, bounds)]
         return self._finish(s, k, v, u)
 
-    def observe(self, s: EstimatorState, k: int, y: ArrayLike, u_now: ArrayLike,
-                u_prev: Iterable[float] | None = None) -> StepResult:
+    def observe(
+        self, s: EstimatorState, k: int, y: ArrayLike, u_now: ArrayLike, u_prev: Iterable[float] | None = None
+    ) -> StepResult:
         """Observe-only: eq. (5) with the u(k) the vehicle's own controller issued (no command computed)."""
         v = self._advance(s, k, u_prev) + [float(e) for e in np.ravel(y)]
         return self._finish(s, k, v, [float(e) for e in np.ravel(u_now)])

@@ -121,9 +121,14 @@ class Mode:
         return 2 * math.pi / wd if self.oscillatory and wd > 0 else None
 
     def as_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "wn_rad_s": self.wn, "zeta": self.zeta, "period_s": self.period_s,
-                "oscillatory": self.oscillatory,
-                "eigenvalues": [[float(e.real), float(e.imag)] for e in self.eigenvalues]}
+        return {
+            "name": self.name,
+            "wn_rad_s": self.wn,
+            "zeta": self.zeta,
+            "period_s": self.period_s,
+            "oscillatory": self.oscillatory,
+            "eigenvalues": [[float(e.real), float(e.imag)] for e in self.eigenvalues],
+        }
 
     def describe(self) -> str:
         if not math.isfinite(self.wn):
@@ -165,25 +170,30 @@ class Identification:
 
     def report(self) -> dict[str, Any]:
         """A JSON-friendly summary (``fault-monitor identify --json``): strict JSON, a non-finite number is null."""
-        report: dict[str, Any] = finite_or_none({
-            "h": self.h,
-            "states": list(self.state_names),
-            "inputs": list(self.input_names),
-            "operating_point": dict(self.operating_point),
-            "operating_point_source": self.operating_point_source,
-            "fit_percent": dict(self.fit_validation),
-            "fit_percent_estimation": dict(self.fit_estimation),
-            "modes": [m.as_dict() for m in self.modes],
-            "A_c": self.A_c.tolist(),
-            "B_c": self.B_c.tolist(),
-            "samples": {"log": self.samples, "estimation_pairs": self.samples_estimation,
-                        "validation": self.samples_validation},
-            "excitation": dict(self.excitation),
-            "validation_span_s": list(self.validation_span_s),
-            "method": dict(self.method),
-            "disturbance": self.disturbance,
-            "notes": list(self.notes),
-        })
+        report: dict[str, Any] = finite_or_none(
+            {
+                "h": self.h,
+                "states": list(self.state_names),
+                "inputs": list(self.input_names),
+                "operating_point": dict(self.operating_point),
+                "operating_point_source": self.operating_point_source,
+                "fit_percent": dict(self.fit_validation),
+                "fit_percent_estimation": dict(self.fit_estimation),
+                "modes": [m.as_dict() for m in self.modes],
+                "A_c": self.A_c.tolist(),
+                "B_c": self.B_c.tolist(),
+                "samples": {
+                    "log": self.samples,
+                    "estimation_pairs": self.samples_estimation,
+                    "validation": self.samples_validation,
+                },
+                "excitation": dict(self.excitation),
+                "validation_span_s": list(self.validation_span_s),
+                "method": dict(self.method),
+                "disturbance": self.disturbance,
+                "notes": list(self.notes),
+            }
+        )
         return report
 
 
@@ -217,7 +227,8 @@ def modes_of(A_c: np.ndarray) -> list[Mode]:
     order = np.argsort(-np.abs(eig), kind="stable")
     eig = eig[order]
     names = {1: ["short period"], 2: ["short period", "phugoid"]}.get(len(eig) // 2) or [
-        f"mode {i + 1}" for i in range(len(eig) // 2)]
+        f"mode {i + 1}" for i in range(len(eig) // 2)
+    ]
     modes: list[Mode] = []
     for i, name in enumerate(names):
         a, b = complex(eig[2 * i]), complex(eig[2 * i + 1])
@@ -255,7 +266,8 @@ def _excitation_window(t: np.ndarray, u: np.ndarray, name: str) -> tuple[int, in
         raise IdentificationError(
             f"no excitation: the {name} stays within {spread:.3f} deg{level} over the {len(u)} samples "
             f"({seconds:.1f} s) of the log (identify needs it moved by at least {MIN_SPREAD} deg, e.g. a PRBS "
-            "of +-1 deg for a minute: sim-vehicle run --excite prbs:1:60)")
+            "of +-1 deg for a minute: sim-vehicle run --excite prbs:1:60)"
+        )
     threshold = QUIET_FRACTION * spread
     lead, _ = _runs(np.abs(u - u[0]) <= threshold)
     _, tail = _runs(np.abs(u - u[-1]) <= threshold)
@@ -275,13 +287,16 @@ def _lstsq(phi: np.ndarray, target: np.ndarray, names: list[str]) -> np.ndarray:
             if names[i] == "1":
                 scale[i] = 1.0
                 continue
-            raise IdentificationError(f"no excitation: {names[i]} does not move over the fitted samples "
-                                      "(a constant regressor cannot be told from the others)")
+            raise IdentificationError(
+                f"no excitation: {names[i]} does not move over the fitted samples "
+                "(a constant regressor cannot be told from the others)"
+            )
     theta, _, rank, sv = np.linalg.lstsq(phi / scale, target, rcond=None)
     if rank < phi.shape[1] or sv[-1] < 1e-9 * sv[0]:
         raise IdentificationError(
             f"no excitation: the fitted samples do not tell {', '.join(n for n in names if n != '1')} apart "
-            f"(regressor condition number {sv[0] / max(sv[-1], 1e-300):.3g}); fly a richer manoeuvre")
+            f"(regressor condition number {sv[0] / max(sv[-1], 1e-300):.3g}); fly a richer manoeuvre"
+        )
     scaled: np.ndarray = theta / scale[:, None]
     return scaled
 
@@ -317,8 +332,9 @@ def simulate(A_d: np.ndarray, B_d: np.ndarray, x0: np.ndarray, u: np.ndarray) ->
         return (V @ z).real.T
 
 
-def _output_error(A_d: np.ndarray, B_d: np.ndarray, y: np.ndarray, u: np.ndarray, offset: bool,
-                  max_iterations: int = 40) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]] | None:
+def _output_error(
+    A_d: np.ndarray, B_d: np.ndarray, y: np.ndarray, u: np.ndarray, offset: bool, max_iterations: int = 40
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]] | None:
     """Refine ``(A_d, B_d)`` to the smallest free-run error over ``y`` (grid rows, NaN where missing), each output
     weighted by its spread; the initial state is a parameter, and with ``offset`` a constant offset of the
     measurements too (the operating point, when it is not measured). None when the refinement does not improve.
@@ -332,8 +348,8 @@ def _output_error(A_d: np.ndarray, B_d: np.ndarray, y: np.ndarray, u: np.ndarray
     cuts = np.cumsum(sizes)
 
     def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        A, B = p[:cuts[0]].reshape(n, n), p[cuts[0]:cuts[1]].reshape(n, m)
-        x0, d = p[cuts[1]:cuts[2]], (p[cuts[2]:cuts[3]] if offset else np.zeros(n))
+        A, B = p[: cuts[0]].reshape(n, n), p[cuts[0] : cuts[1]].reshape(n, m)
+        x0, d = p[cuts[1] : cuts[2]], (p[cuts[2] : cuts[3]] if offset else np.zeros(n))
         return A, B, x0, d
 
     def residual(p: np.ndarray) -> np.ndarray:
@@ -389,18 +405,23 @@ def _continuous(A_d: np.ndarray, B_d: np.ndarray, h: float) -> tuple[np.ndarray,
         raise IdentificationError(
             f"no continuous model: the fitted discrete A has the eigenvalue {root:.4g} on the closed negative real "
             f"axis, which has no real logarithm at h = {h:g} s (a mode faster than the sampling, or too little "
-            "excitation); sample faster (--h) or fly a richer manoeuvre")
+            "excitation); sample faster (--h) or fly a richer manoeuvre"
+        )
     try:
         model = reconstruct_continuous(A_d, B_d, np.zeros((n, 1)), np.zeros((n, 1)), h)
     except (UserError, np.linalg.LinAlgError, ValueError) as exc:
         raise IdentificationError(f"no continuous model: {exc}") from None
     A_c, B_c = model.A_c, model.B_c
     A_back, gamma = integral_expm(A_c, h)
-    if (not np.all(np.isfinite(A_c))
-            or np.linalg.norm(A_back - A_d) > 1e-8 * max(1.0, float(np.linalg.norm(A_d)))
-            or np.linalg.norm(gamma @ B_c - B_d) > 1e-8 * max(1.0, float(np.linalg.norm(B_d)))):
-        raise IdentificationError("no continuous model: the matrix logarithm of the fitted discrete A does not "
-                                  "give it back (ill-conditioned fit); fly a richer manoeuvre")
+    if (
+        not np.all(np.isfinite(A_c))
+        or np.linalg.norm(A_back - A_d) > 1e-8 * max(1.0, float(np.linalg.norm(A_d)))
+        or np.linalg.norm(gamma @ B_c - B_d) > 1e-8 * max(1.0, float(np.linalg.norm(B_d)))
+    ):
+        raise IdentificationError(
+            "no continuous model: the matrix logarithm of the fitted discrete A does not "
+            "give it back (ill-conditioned fit); fly a richer manoeuvre"
+        )
     return A_c, B_c, A_back, gamma
 
 
@@ -419,8 +440,10 @@ def identify(data: FlightData, holdout: float = HOLDOUT) -> Identification:
         k, X, U = k[order], X[order], U[order]
     n, m = X.shape[1], U.shape[1]
     if len(k) < 2:
-        raise IdentificationError(f"too short: {len(k)} usable sample(s) in the log; identify needs at least "
-                                  f"{MIN_EXCITATION_S:g} s of excitation")
+        raise IdentificationError(
+            f"too short: {len(k)} usable sample(s) in the log; identify needs at least "
+            f"{MIN_EXCITATION_S:g} s of excitation"
+        )
     t = (k - k[0]) * h
     start, end, lead, tail, spread = _excitation_window(t, U[:, 0], inputs[0])
     seconds = float(t[end - 1] - t[start]) + h
@@ -430,7 +453,8 @@ def identify(data: FlightData, holdout: float = HOLDOUT) -> Identification:
         raise IdentificationError(
             f"too short: the excitation lasts {seconds:.1f} s ({end - start} samples at h = {h:g} s); identify needs "
             f"at least {MIN_EXCITATION_S:g} s and {int(math.ceil(needed_pairs / (1 - holdout)))} samples of it "
-            f"({holdout:.0%} is held out to validate the model)")
+            f"({holdout:.0%} is held out to validate the model)"
+        )
     split = start + int(round((1 - holdout) * (end - start)))
     lead_from = start
     if lead:
@@ -442,8 +466,10 @@ def identify(data: FlightData, holdout: float = HOLDOUT) -> Identification:
     nxt = fit_rows[:-1] + 1
     pairs = fit_rows[:-1][k[nxt] == k[fit_rows[:-1]] + 1]
     if len(pairs) < needed_pairs:
-        raise IdentificationError(f"too short: only {len(pairs)} pairs of consecutive samples in the fitted part "
-                                  f"(the log has gaps); identify needs {needed_pairs}")
+        raise IdentificationError(
+            f"too short: only {len(pairs)} pairs of consecutive samples in the fitted part "
+            f"(the log has gaps); identify needs {needed_pairs}"
+        )
     regressor_names = [*names, *inputs]
     if lead:
         quiet = slice(lead_from, start)
@@ -459,23 +485,29 @@ def identify(data: FlightData, holdout: float = HOLDOUT) -> Identification:
             op_u = U[start:end].mean(axis=0)
             where = f"the {inputs[0]}'s mean over the excitation (no quiet flight before or after it)"
         centre = X[pairs].mean(axis=0)
-        fitted = _lstsq(np.hstack([X[pairs] - centre, U[pairs] - op_u, np.ones((len(pairs), 1))]),
-                        X[pairs + 1] - centre, [*regressor_names, "1"])
-        A_d, B_d, c = fitted[:n].T, fitted[n:n + m].T, fitted[n + m]
+        fitted = _lstsq(
+            np.hstack([X[pairs] - centre, U[pairs] - op_u, np.ones((len(pairs), 1))]),
+            X[pairs + 1] - centre,
+            [*regressor_names, "1"],
+        )
+        A_d, B_d, c = fitted[:n].T, fitted[n : n + m].T, fitted[n + m]
         try:
             op_x = centre + np.linalg.solve(np.eye(n) - A_d, c)
         except np.linalg.LinAlgError:
-            raise IdentificationError("no excitation: the fitted model has an integrator (eigenvalue 1): no "
-                                      "equilibrium to take as the operating point; fly a lead-in at trim") from None
+            raise IdentificationError(
+                "no excitation: the fitted model has an integrator (eigenvalue 1): no "
+                "equilibrium to take as the operating point; fly a lead-in at trim"
+            ) from None
         source = f"equilibrium of the fitted model at {where}"
-        notes.append("no trimmed flight before the excitation: the operating point is the fitted model's "
-                     "equilibrium; a few seconds of trim before the manoeuvre would measure it instead")
+        notes.append(
+            "no trimmed flight before the excitation: the operating point is the fitted model's "
+            "equilibrium; a few seconds of trim before the manoeuvre would measure it instead"
+        )
 
     # output error: the free-run fit over the fitted part, from the least-squares model (see the docstring)
     lo_row = lead_from if lead else start
     k0, k1 = int(k[lo_row]), int(k[split - 1]) + 1
-    refined = _output_error(A_d, B_d, _grid(k, X - op_x, k0, k1), _fill(_grid(k, U - op_u, k0, k1)),
-                            offset=not lead)
+    refined = _output_error(A_d, B_d, _grid(k, X - op_x, k0, k1), _fill(_grid(k, U - op_u, k0, k1)), offset=not lead)
     method: dict[str, Any] = {"initial": "equation-error least squares", "refined": False}
     candidates = [(A_d, B_d, np.zeros(n))]
     if refined is not None:
@@ -499,8 +531,10 @@ def identify(data: FlightData, holdout: float = HOLDOUT) -> Identification:
         assert failure is not None
         raise failure
     if np.max(np.abs(np.angle(np.linalg.eigvals(A_d)))) > 0.5 * math.pi:
-        notes.append(f"a mode rotates more than a quarter turn per sample (h = {h:g} s): its frequency is near "
-                     "Nyquist and poorly resolved")
+        notes.append(
+            f"a mode rotates more than a quarter turn per sample (h = {h:g} s): its frequency is near "
+            "Nyquist and poorly resolved"
+        )
     # the model as the plant file has it (x' = A_c x + B_c u, exactly discretised): what the validation runs
     A_v, B_v = A_back, gamma @ B_c
 
@@ -523,20 +557,40 @@ def identify(data: FlightData, holdout: float = HOLDOUT) -> Identification:
     op = {name: float(v) for name, v in zip(names, op_x)}
     op.update({name: float(v) for name, v in zip(inputs, op_u)})
     return Identification(
-        h=h, state_names=names, input_names=inputs, operating_point=op, operating_point_source=source,
-        A_d=A_d, B_d=B_d, A_c=A_c, B_c=B_c,
+        h=h,
+        state_names=names,
+        input_names=inputs,
+        operating_point=op,
+        operating_point_source=source,
+        A_d=A_d,
+        B_d=B_d,
+        A_c=A_c,
+        B_c=B_c,
         fit_validation={name: float(f) for name, f in zip(names, fit_v)},
         fit_estimation={name: float(f) for name, f in zip(names, fit_e)},
-        modes=modes_of(A_c), samples=len(k), samples_estimation=len(pairs), samples_validation=len(yv),
-        excitation={"start_s": float(t[start]), "end_s": float(t[end - 1] + h), "seconds": seconds,
-                    "spread_deg": spread, "lead_in_s": float(t[start] - t[0]) if lead else 0.0,
-                    "tail_s": float(t[-1] - t[end] + h) if tail else 0.0},
+        modes=modes_of(A_c),
+        samples=len(k),
+        samples_estimation=len(pairs),
+        samples_validation=len(yv),
+        excitation={
+            "start_s": float(t[start]),
+            "end_s": float(t[end - 1] + h),
+            "seconds": seconds,
+            "spread_deg": spread,
+            "lead_in_s": float(t[start] - t[0]) if lead else 0.0,
+            "tail_s": float(t[-1] - t[end] + h) if tail else 0.0,
+        },
         validation_span_s=(float(tv[0]) if len(tv) else 0.0, float(tv[-1]) if len(tv) else 0.0),
-        validation_run={"t": tv, "y": yv, "y_hat": yv_hat}, method=method, notes=notes, disturbance=disturbance)
+        validation_run={"t": tv, "y": yv, "y_hat": yv_hat},
+        method=method,
+        notes=notes,
+        disturbance=disturbance,
+    )
 
 
-def gust_from_residual(k: np.ndarray, x: np.ndarray, u: np.ndarray, A_d: np.ndarray, B_d: np.ndarray,
-                        names: tuple[str, ...], h: float) -> dict[str, float] | None:
+def gust_from_residual(
+    k: np.ndarray, x: np.ndarray, u: np.ndarray, A_d: np.ndarray, B_d: np.ndarray, names: tuple[str, ...], h: float
+) -> dict[str, float] | None:
     """The gust input the flight met, from the model's one-step residual: ``{"sigma", "time_constant", "samples"}``.
 
     What the model does not explain from one sample to the next, ``r(k) = x(k+1) - A x(k) - B u(k)``, is projected

@@ -34,8 +34,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["lag_span", "lag_intervals", "lag_point", "lag_realization", "lagged_matrices", "curve_of",
-           "MAX_LAG_PARTS"]
+__all__ = ["lag_span", "lag_intervals", "lag_point", "lag_realization", "lagged_matrices", "curve_of", "MAX_LAG_PARTS"]
 
 # each whole-sample part the interval spans multiplies the certificate's vertices by its own polytope's count
 # (up to 2n): 3 parts on a 4-state aircraft is 512 vertices, minutes of LMI solving; 3 is the practical limit
@@ -74,8 +73,7 @@ def lag_intervals(h: float, tau_min: float, tau_max: float) -> list[tuple[float,
     return [(clip(tau_min - j * h), clip(tau_max - j * h)) for j in range(first, last + 1)]
 
 
-def lag_point(curve: Callable[[float], np.ndarray], h: float, tau_min: float, tau_max: float,
-              tau: float) -> np.ndarray:
+def lag_point(curve: Callable[[float], np.ndarray], h: float, tau_min: float, tau_max: float, tau: float) -> np.ndarray:
     """The stacked ``[G(a_first); ...; G(a_last)]`` of a *constant* delay ``tau`` (``a_j = clip(tau - j h)``).
 
     ``curve(a)`` is ``G(a)``. A constant delay is one admissible pattern among many; the polytope holds all.
@@ -84,15 +82,16 @@ def lag_point(curve: Callable[[float], np.ndarray], h: float, tau_min: float, ta
     return np.vstack([curve(min(max(tau - j * h, 0.0), h)) for j in range(first, last + 1)])
 
 
-def lag_realization(point: np.ndarray, A: np.ndarray, G0: np.ndarray, first: int, last: int
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def lag_realization(
+    point: np.ndarray, A: np.ndarray, G0: np.ndarray, first: int, last: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(A, B0, B1)`` of the lagged plant at one point ``[G(a_first); ...; G(a_last)]`` (see the module docstring).
 
     ``A`` and ``G0 = G(0)`` are the sampled plant's own; the result acts on ``[x; u(k-2); ...; u(k-last-1)]``
     with inputs ``u(k)`` (B0) and ``u(k-1)`` (B1).
     """
     n, m = G0.shape
-    parts = {j: point[(j - first) * n:(j - first + 1) * n] for j in range(first, last + 1)}
+    parts = {j: point[(j - first) * n : (j - first + 1) * n] for j in range(first, last + 1)}
     zero = np.zeros((n, m))
 
     def coefficient(j: int) -> np.ndarray:  # of u(k-j) in x(k+1)
@@ -103,21 +102,25 @@ def lag_realization(point: np.ndarray, A: np.ndarray, G0: np.ndarray, first: int
     A_a = np.zeros((n_a, n_a))
     A_a[:n, :n] = A
     for j in range(2, last + 2):  # u(k-j) sits in history slot j - 1
-        A_a[:n, n + (j - 2) * m:n + (j - 1) * m] = coefficient(j)
+        A_a[:n, n + (j - 2) * m : n + (j - 1) * m] = coefficient(j)
     for s in range(1, last):  # slot s+1 takes slot s
-        A_a[n + s * m:n + (s + 1) * m, n + (s - 1) * m:n + s * m] = np.eye(m)
+        A_a[n + s * m : n + (s + 1) * m, n + (s - 1) * m : n + s * m] = np.eye(m)
     B0 = np.zeros((n_a, m))
     B0[:n] = coefficient(0)
     B1 = np.zeros((n_a, m))
     B1[:n] = coefficient(1)
     if last >= 1:
-        B1[n:n + m] = np.eye(m)  # u(k-2) at k+1 is u(k-1) now
+        B1[n : n + m] = np.eye(m)  # u(k-2) at k+1 is u(k-1) now
     return A_a, B0, B1
 
 
-def lagged_matrices(C: np.ndarray, Df: np.ndarray, Dd: np.ndarray, m: int, last: int
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def lagged_matrices(
+    C: np.ndarray, Df: np.ndarray, Dd: np.ndarray, m: int, last: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``C``, ``Df``, ``Dd`` of the lagged plant: the history slots are neither measured nor disturbed."""
     extra = m * last
-    return (np.hstack([C, np.zeros((C.shape[0], extra))]), np.vstack([Df, np.zeros((extra, Df.shape[1]))]),
-            np.vstack([Dd, np.zeros((extra, Dd.shape[1]))]))
+    return (
+        np.hstack([C, np.zeros((C.shape[0], extra))]),
+        np.vstack([Df, np.zeros((extra, Df.shape[1]))]),
+        np.vstack([Dd, np.zeros((extra, Dd.shape[1]))]),
+    )

@@ -27,8 +27,16 @@ import numpy as np
 from monitor.model.closed_loop import Gains, closed_loop, observer_indices
 from monitor.model.plant import Plant
 
-__all__ = ["refuse_past_one_sample", "loss_modes", "loss_sequences", "macro_steps", "macro_step_growth", "check_max_losses", "LOSS_KINDS",
-           "MAX_LOSSES"]
+__all__ = [
+    "refuse_past_one_sample",
+    "loss_modes",
+    "loss_sequences",
+    "macro_steps",
+    "macro_step_growth",
+    "check_max_losses",
+    "LOSS_KINDS",
+    "MAX_LOSSES",
+]
 
 LOSS_KINDS = ("sample", "command")
 MAX_LOSSES = 8  # 2^(N+1) - 1 loss runs per delay vertex: N = 8 is ~2,000 LMI blocks, a few tens of seconds
@@ -39,8 +47,10 @@ def check_max_losses(max_losses: int) -> int:
     from monitor.errors import UserError
 
     if not 0 <= max_losses <= MAX_LOSSES:
-        raise UserError(f"--max-losses must be between 0 and {MAX_LOSSES} (every run of up to N losses is "
-                        f"enumerated: 2^(N+1) - 1 of them), got {max_losses}")
+        raise UserError(
+            f"--max-losses must be between 0 and {MAX_LOSSES} (every run of up to N losses is "
+            f"enumerated: 2^(N+1) - 1 of them), got {max_losses}"
+        )
     return max_losses
 
 
@@ -54,9 +64,11 @@ def refuse_past_one_sample(plant: Plant) -> None:
     if plant.lags is not None:
         from monitor.errors import UserError
 
-        raise UserError(f"--max-losses is certified for delays within one sample (tau_max < h); this plant's "
-                        f"tau_max = {plant.tau_max:g} s reaches past h = {plant.h:g} s, where a late command still "
-                        f"acts on arrival: certify the delay alone (without --max-losses)")
+        raise UserError(
+            f"--max-losses is certified for delays within one sample (tau_max < h); this plant's "
+            f"tau_max = {plant.tau_max:g} s reaches past h = {plant.h:g} s, where a late command still "
+            f"acts on arrival: certify the delay alone (without --max-losses)"
+        )
 
 
 def loss_modes(plant: Plant, gains: Gains) -> dict[str, np.ndarray]:
@@ -85,8 +97,9 @@ def loss_sequences(max_losses: int) -> list[tuple[str, ...]]:
     return [seq for j in range(max_losses + 1) for seq in itertools.product(LOSS_KINDS, repeat=j)]
 
 
-def macro_steps(plant: Plant, gains: Gains, b0_points: list[np.ndarray], max_losses: int,
-                steady: tuple[np.ndarray, np.ndarray]) -> list[np.ndarray]:
+def macro_steps(
+    plant: Plant, gains: Gains, b0_points: list[np.ndarray], max_losses: int, steady: tuple[np.ndarray, np.ndarray]
+) -> list[np.ndarray]:
     """``D(B0) X_j ... X_1`` for every loss run of length <= N and every ``B0`` given (vertices or a grid)."""
     modes = loss_modes(plant, gains)
     runs = []
@@ -99,8 +112,9 @@ def macro_steps(plant: Plant, gains: Gains, b0_points: list[np.ndarray], max_los
     return [D @ run for D in delivered for run in runs]
 
 
-def macro_step_growth(plant: Plant, gains: Gains, b0_points: list[np.ndarray], max_losses: int,
-                      steady: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+def macro_step_growth(
+    plant: Plant, gains: Gains, b0_points: list[np.ndarray], max_losses: int, steady: tuple[np.ndarray, np.ndarray]
+) -> np.ndarray:
     """Growth per sample, ``rho(S) ** (1 / (j + 1))``, of every macro-step: ``[b0 point, loss run]`` in the order
     of ``b0_points`` and ``loss_sequences``. Above 1 anywhere: that pattern, repeated, diverges (a lower bound)."""
     steps = np.array(macro_steps(plant, gains, b0_points, max_losses, steady))

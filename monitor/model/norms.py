@@ -72,7 +72,7 @@ def hinf_norms(A: np.ndarray, B: np.ndarray, outputs: list[np.ndarray], points: 
         return [float("inf")] * len(outputs)
     n = A.shape[0]
     Bt = Z.conj().T @ B
-    upper = [T[i, i + 1:] for i in range(n)]
+    upper = [T[i, i + 1 :] for i in range(n)]
 
     def resolvent(omega: np.ndarray) -> np.ndarray:
         """``(e^{jw} I - A)^-1 B`` in Schur coordinates (times Z^H): a triangular solve, vectorised over w.
@@ -86,8 +86,11 @@ def hinf_norms(A: np.ndarray, B: np.ndarray, outputs: list[np.ndarray], points: 
         X = np.empty((n, z.size, Bt.shape[1]), dtype=complex)  # state index first: X[i + 1:] is contiguous
         flat = X.reshape(n, -1)  # a view: one matrix-vector product per row (tensordot's reshapes cost 3x)
         for i in range(n - 1, -1, -1):
-            acc = Bt[i] + (upper[i] @ flat[i + 1:]).reshape(z.size, -1) if i < n - 1 else \
-                np.broadcast_to(Bt[i], (z.size, Bt.shape[1]))
+            acc = (
+                Bt[i] + (upper[i] @ flat[i + 1 :]).reshape(z.size, -1)
+                if i < n - 1
+                else np.broadcast_to(Bt[i], (z.size, Bt.shape[1]))
+            )
             X[i] = acc / (z - poles[i])[:, None]
         return X
 

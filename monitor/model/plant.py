@@ -30,12 +30,35 @@ from monitor.errors import UserError
 from monitor.model.discretize import ContinuousModel, discretize
 from monitor.wire import TURBULENCE_LEVELS
 
-__all__ = ["Plant", "Lags", "Disturbance", "ContinuousModel", "Actuator", "load_plant", "parse_plant", "plant_from_table", "with_tau_max", "preset_names"]
+__all__ = [
+    "Plant",
+    "Lags",
+    "Disturbance",
+    "ContinuousModel",
+    "Actuator",
+    "load_plant",
+    "parse_plant",
+    "plant_from_table",
+    "with_tau_max",
+    "preset_names",
+]
 
 PRESETS = {"paper": "paper.toml", "paper-continuous": "paper-continuous.toml"}
 
-_COMMON_KEYS = {"form", "name", "description", "unit", "h", "tau_min", "tau_max", "C", "actuator", "disturbance", "signals",
-                "identification"}
+_COMMON_KEYS = {
+    "form",
+    "name",
+    "description",
+    "unit",
+    "h",
+    "tau_min",
+    "tau_max",
+    "C",
+    "actuator",
+    "disturbance",
+    "signals",
+    "identification",
+}
 _CONTINUOUS_KEYS = _COMMON_KEYS | {"A_c", "B_c", "D_cf", "D_cd"}
 _DISCRETE_KEYS = _COMMON_KEYS | {"A", "B0", "B1", "Df", "Dd", "delta", "E"}
 _ACTUATOR_KEYS = {"limit", "rate_limit"}
@@ -157,9 +180,7 @@ def load_plant(spec: str | Path) -> Plant:
         return parse_plant(text, source=f"preset:{spec_str}")
     path = Path(spec_str)
     if not path.is_file():
-        raise UserError(
-            f"plant '{spec_str}' is neither a preset ({', '.join(preset_names())}) nor a readable file"
-        )
+        raise UserError(f"plant '{spec_str}' is neither a preset ({', '.join(preset_names())}) nor a readable file")
     try:
         text = path.read_text("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
@@ -192,7 +213,7 @@ def plant_from_table(raw: dict[str, Any], source: str) -> Plant:
     """Validate a parsed plant table (see the module docstring) and build the Plant."""
     form = raw.get("form")
     if form not in ("continuous", "discrete"):
-        raise UserError(f"{source}: key 'form' must be \"continuous\" or \"discrete\", got {form!r}")
+        raise UserError(f'{source}: key \'form\' must be "continuous" or "discrete", got {form!r}')
     allowed = _CONTINUOUS_KEYS if form == "continuous" else _DISCRETE_KEYS
     unknown = sorted(set(raw) - allowed)
     if unknown:
@@ -201,14 +222,17 @@ def plant_from_table(raw: dict[str, Any], source: str) -> Plant:
         )
     reader = _Reader(raw, source)
     if "identification" in raw and not isinstance(raw["identification"], dict):
-        raise UserError(f"{source}: key 'identification' must be a table ([identification]: how the plant was "
-                        f"identified, information only), got {raw['identification']!r}")
+        raise UserError(
+            f"{source}: key 'identification' must be a table ([identification]: how the plant was "
+            f"identified, information only), got {raw['identification']!r}"
+        )
     h = reader.scalar("h", positive=True)
     tau_min = reader.scalar("tau_min")
     tau_max = reader.scalar("tau_max")
     if not 0.0 <= tau_min <= tau_max:
-        raise UserError(f"{source}: keys 'tau_min'/'tau_max' must satisfy 0 <= tau_min <= tau_max "
-                        f"(got {tau_min}, {tau_max})")
+        raise UserError(
+            f"{source}: keys 'tau_min'/'tau_max' must satisfy 0 <= tau_min <= tau_max (got {tau_min}, {tau_max})"
+        )
     if tau_max >= h:
         return _lagged_plant(raw, source, h, tau_min, tau_max)
     C = reader.matrix("C")
@@ -267,18 +291,36 @@ def _lagged_plant(raw: dict[str, Any], source: str, h: float, tau_min: float, ta
         raise UserError(
             f"{source}: keys 'tau_min'/'tau_max' = [{tau_min:g}, {tau_max:g}] s span {last - first + 1} whole samples "
             f"of h = {h:g} s; at most {MAX_LAG_PARTS} can be certified (each multiplies the certificate's vertices): "
-            f"narrow the interval (tau_max - tau_min < {MAX_LAG_PARTS - 1} h always fits)")
+            f"narrow the interval (tau_max - tau_min < {MAX_LAG_PARTS - 1} h always fits)"
+        )
     base = plant_from_table({**raw, "tau_min": 0.0, "tau_max": 0.0}, source)
     model = base.continuous or reconstruct_continuous(base.A, base.B0 + base.B1, base.Df, base.Dd, h)
     curve = curve_of(model.A_c, model.B_c, h)
     nominal = lag_point(curve, h, tau_min, tau_max, 0.5 * (tau_min + tau_max))
     A, B0, B1 = lag_realization(nominal, base.A, curve(0.0), first, last)
     C, Df, Dd = lagged_matrices(base.C, base.Df, base.Dd, base.m, last)
-    return Plant(name=base.name, form=base.form, h=h, tau_min=tau_min, tau_max=tau_max, A=A, B0=B0, B1=B1, C=C,
-                 Df=Df, Dd=Dd, unit=base.unit, description=base.description, actuator=base.actuator,
-                 disturbance=base.disturbance, source=source,
-                 digest=_digest({k: v for k, v in raw.items() if k not in _NOT_DYNAMICS}), signals=base.signals,
-                 raw=raw, lags=Lags(base=base, first=first, last=last))
+    return Plant(
+        name=base.name,
+        form=base.form,
+        h=h,
+        tau_min=tau_min,
+        tau_max=tau_max,
+        A=A,
+        B0=B0,
+        B1=B1,
+        C=C,
+        Df=Df,
+        Dd=Dd,
+        unit=base.unit,
+        description=base.description,
+        actuator=base.actuator,
+        disturbance=base.disturbance,
+        source=source,
+        digest=_digest({k: v for k, v in raw.items() if k not in _NOT_DYNAMICS}),
+        signals=base.signals,
+        raw=raw,
+        lags=Lags(base=base, first=first, last=last),
+    )
 
 
 class _Reader:
@@ -332,14 +374,18 @@ class _Reader:
             raise self._fail("disturbance", "must be a table ([disturbance] with sigma and time_constant)")
         unknown = sorted(set(table) - _DISTURBANCE_KEYS)
         if unknown:
-            raise self._fail(f"disturbance.{unknown[0]}",
-                             f"is unknown (allowed: {', '.join(sorted(_DISTURBANCE_KEYS))})")
+            raise self._fail(
+                f"disturbance.{unknown[0]}", f"is unknown (allowed: {', '.join(sorted(_DISTURBANCE_KEYS))})"
+            )
         sub = _Reader(table, self.source)
         level = table.get("turbulence")
         if level is not None and level not in TURBULENCE_LEVELS:
             raise self._fail("disturbance.turbulence", f"must be one of {', '.join(TURBULENCE_LEVELS)}, got {level!r}")
-        return Disturbance(sigma=sub.scalar("sigma", positive=True),
-                           time_constant=sub.scalar("time_constant", positive=True), turbulence=level)
+        return Disturbance(
+            sigma=sub.scalar("sigma", positive=True),
+            time_constant=sub.scalar("time_constant", positive=True),
+            turbulence=level,
+        )
 
     def actuator(self) -> Actuator:
         table = self.raw.get("actuator", {})

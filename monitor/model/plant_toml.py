@@ -51,10 +51,13 @@ def _round(x: float, digits: int = 6) -> float:
 
 def disturbance_table(gust: dict[str, float], turbulence: str | None, source: str | None = None) -> list[str]:
     """The ``[disturbance]`` table's lines for a gust measured by ``gust_from_residual``."""
-    lines = ["[disturbance]", "# the gust input d (through D_cd) the flight met, as a first-order Gauss-Markov process: "
-             "what", "# the model's one-step residual shows along D_cd (calm air: the model's own error)",
-             f"sigma = {_value(_round(gust['sigma']))}   # deg",
-             f"time_constant = {_value(_round(gust['time_constant']))}   # s (integral time scale)"]
+    lines = [
+        "[disturbance]",
+        "# the gust input d (through D_cd) the flight met, as a first-order Gauss-Markov process: what",
+        "# the model's one-step residual shows along D_cd (calm air: the model's own error)",
+        f"sigma = {_value(_round(gust['sigma']))}   # deg",
+        f"time_constant = {_value(_round(gust['time_constant']))}   # s (integral time scale)",
+    ]
     if turbulence is not None:
         lines.append(f"turbulence = {_value(turbulence)}   # the level flown (sim-vehicle --turbulence)")
     if source is not None:
@@ -62,10 +65,21 @@ def disturbance_table(gust: dict[str, float], turbulence: str | None, source: st
     return lines
 
 
-def plant_toml(result: Identification, *, name: str, description: str, tau_max: float, actuator_limit: float,
-               tau_min: float = 0.0, turbulence: str | None = None,
-               actuator_limit_source: str, signals: dict[str, Any], source_log: str, model: str,
-               header: list[str] | None = None) -> str:
+def plant_toml(
+    result: Identification,
+    *,
+    name: str,
+    description: str,
+    tau_max: float,
+    actuator_limit: float,
+    tau_min: float = 0.0,
+    turbulence: str | None = None,
+    actuator_limit_source: str,
+    signals: dict[str, Any],
+    source_log: str,
+    model: str,
+    header: list[str] | None = None,
+) -> str:
     """The plant file ``fault-monitor design`` / ``run`` take as it is (the README's plant file format).
 
     ``signals`` is the ``[signals]`` table without ``operating_point`` (added here) and with ``measured`` and
@@ -77,9 +91,18 @@ def plant_toml(result: Identification, *, name: str, description: str, tau_max: 
         raise ValueError("the gust input D_cd needs alpha among the states")
     gust = result.A_c[:, [result.state_names.index("alpha")]]
     top: list[tuple[str, Any]] = [
-        ("form", "continuous"), ("name", name), ("description", description), ("unit", "deg"),
-        ("h", float(result.h)), ("tau_min", float(tau_min)), ("tau_max", float(tau_max)),
-        ("A_c", result.A_c), ("B_c", result.B_c), ("D_cf", result.B_c), ("D_cd", gust), ("C", np.eye(n)),
+        ("form", "continuous"),
+        ("name", name),
+        ("description", description),
+        ("unit", "deg"),
+        ("h", float(result.h)),
+        ("tau_min", float(tau_min)),
+        ("tau_max", float(tau_max)),
+        ("A_c", result.A_c),
+        ("B_c", result.B_c),
+        ("D_cf", result.B_c),
+        ("D_cd", gust),
+        ("C", np.eye(n)),
     ]
     lines = [f"# {line}" for line in (header or [])]
     lines += [f"{key} = {_value(value)}" for key, value in top]
@@ -97,13 +120,19 @@ def plant_toml(result: Identification, *, name: str, description: str, tau_max: 
             lines.append(f"[signals.{table}]")
             lines += [f"{_key(key)} = {_value(value)}" for key, value in signals[table].items()]
     ident = {
-        "source_log": source_log, "model": model, "states": list(result.state_names),
-        "samples": result.samples, "samples_estimation": result.samples_estimation,
+        "source_log": source_log,
+        "model": model,
+        "states": list(result.state_names),
+        "samples": result.samples,
+        "samples_estimation": result.samples_estimation,
         "samples_validation": result.samples_validation,
         "validation_span_s": [_round(v) for v in result.validation_span_s],
         "operating_point_source": result.operating_point_source,
-        "method": ("equation-error least squares, refined by output error" if result.method.get("refined")
-                   else "equation-error least squares"),
+        "method": (
+            "equation-error least squares, refined by output error"
+            if result.method.get("refined")
+            else "equation-error least squares"
+        ),
         "excitation_s": [_round(result.excitation["start_s"]), _round(result.excitation["end_s"])],
         "fit_percent": {s: _round(f, 4) for s, f in result.fit_validation.items()},
     }

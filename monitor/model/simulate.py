@@ -58,8 +58,15 @@ def actuator(plant: Plant, u: np.ndarray) -> np.ndarray:
     return np.clip(u, -limit, limit) if limit is not None else u
 
 
-def simulate(plant: Plant, gains: Gains, steps: int, fault: FaultSchedule, delay: DelaySampler,
-             wind_values: Iterator[float], on_sample: Callable[..., None] | None = None) -> Trace:
+def simulate(
+    plant: Plant,
+    gains: Gains,
+    steps: int,
+    fault: FaultSchedule,
+    delay: DelaySampler,
+    wind_values: Iterator[float],
+    on_sample: Callable[..., None] | None = None,
+) -> Trace:
     """Step plant + observer + controller for ``steps`` samples with delay ``delay.tau(k)`` each sample.
 
     ``wind_values`` yields ``d(k)`` on the plant's first wind input (``Wind.values()``).
@@ -71,8 +78,10 @@ def simulate(plant: Plant, gains: Gains, steps: int, fault: FaultSchedule, delay
     if plant.actuator.rate_limit is not None:
         raise UserError("the Monte-Carlo mode does not model a rate-limited elevator; run the live demo (sim-vehicle)")
     if plant.lags is not None:
-        raise UserError("the Monte-Carlo mode simulates delays within one sample; for a plant whose tau_max reaches "
-                        "past h, fly sim-vehicle (it applies each command when it arrives)")
+        raise UserError(
+            "the Monte-Carlo mode simulates delays within one sample; for a plant whose tau_max reaches "
+            "past h, fly sim-vehicle (it applies each command when it arrives)"
+        )
     est = Estimator(plant, gains)  # saturates its commands at the actuator limit, as the live monitor does
     state = est.initial_state()
     x = np.zeros(plant.n)

@@ -32,8 +32,16 @@ from monitor.files import write_text_atomically
 from monitor.link.flight_log import FlightLog, log_spacing, read_flight
 from monitor.wire import TURBULENCE_LEVELS
 
-__all__ = ["DEFAULT_ACTUATOR_LIMIT", "IDENTIFY_SIGNALS_TOML", "TAU_MAX_FRACTION", "AirMeasured", "IdentifiedLog",
-           "IdentifyRequest", "identify_log", "map_for"]
+__all__ = [
+    "DEFAULT_ACTUATOR_LIMIT",
+    "IDENTIFY_SIGNALS_TOML",
+    "TAU_MAX_FRACTION",
+    "AirMeasured",
+    "IdentifiedLog",
+    "IdentifyRequest",
+    "identify_log",
+    "map_for",
+]
 
 IDENTIFY_SIGNALS_TOML = """
 [signals]
@@ -89,13 +97,16 @@ def map_for(table: dict[str, Any], source: str, states: tuple[str, ...], layouts
         raise UserError(f"{source}: [signals] 'actuator' must name the one elevator signal")
     missing = [s for s in (*states, actuator[0]) if s not in measured]
     if missing:
-        raise UserError(f"{source}: [signals.measured] has no '{missing[0]}' (identify needs "
-                        f"{', '.join((*states, actuator[0]))})")
-    written: dict[str, Any] = {"instant": table.get("instant", "AOA_SSA"), "outputs": list(states),
-                               "actuator": list(actuator),
-                               "measured": {s: measured[s] for s in (*states, actuator[0])},
-                               "command": table.get("command",
-                                                    tomllib.loads(IDENTIFY_SIGNALS_TOML)["signals"]["command"])}
+        raise UserError(
+            f"{source}: [signals.measured] has no '{missing[0]}' (identify needs {', '.join((*states, actuator[0]))})"
+        )
+    written: dict[str, Any] = {
+        "instant": table.get("instant", "AOA_SSA"),
+        "outputs": list(states),
+        "actuator": list(actuator),
+        "measured": {s: measured[s] for s in (*states, actuator[0])},
+        "command": table.get("command", tomllib.loads(IDENTIFY_SIGNALS_TOML)["signals"]["command"]),
+    }
     if layouts is not None:
         return parse_signals(written, source, len(states), 1, layouts), written
     return parse_signals(written, source, len(states), 1), written
@@ -113,8 +124,11 @@ def _missing_signals(flight: FlightLog, sysid: int, smap, states: tuple[str, ...
         never = [n for n in states if samples and all(not math.isfinite(v.get(n, math.nan)) for _k, v in samples)]
         if not never:
             return None
-        line = ("missing signals: " + ", ".join(f"{n} ({field_ref(smap.measured[n])})" for n in never)
-                + f": never a finite value from sysid {sysid}")
+        line = (
+            "missing signals: "
+            + ", ".join(f"{n} ({field_ref(smap.measured[n])})" for n in never)
+            + f": never a finite value from sysid {sysid}"
+        )
         absent = never
     else:
         absent = [n for n in names if smap.measured[n].message not in flight.inventory.names(sysid)]
@@ -167,11 +181,25 @@ class IdentifiedLog:
     def report(self) -> dict[str, Any]:
         """``--json``'s document."""
         r, f = self.request, self.flight
-        return {"source_log": str(r.log), "sysid": self.sysid, "model": r.model, "out": str(r.out),
-                "name": r.plant_name, "tau_min": r.tau_min, "tau_max": self.tau_max, "actuator_limit": r.actuator_limit,
-                **self.result.report(),
-                "log": {"records": f.records, "skipped_bytes": f.skipped_bytes, "truncated": f.truncated,
-                        "seconds": round(self.seconds, 3), **f.counters, "inventory": f.inventory.as_dict()}}
+        return {
+            "source_log": str(r.log),
+            "sysid": self.sysid,
+            "model": r.model,
+            "out": str(r.out),
+            "name": r.plant_name,
+            "tau_min": r.tau_min,
+            "tau_max": self.tau_max,
+            "actuator_limit": r.actuator_limit,
+            **self.result.report(),
+            "log": {
+                "records": f.records,
+                "skipped_bytes": f.skipped_bytes,
+                "truncated": f.truncated,
+                "seconds": round(self.seconds, 3),
+                **f.counters,
+                "inventory": f.inventory.as_dict(),
+            },
+        }
 
 
 def _checked(req: IdentifyRequest) -> None:
@@ -217,8 +245,9 @@ def _vehicle(req: IdentifyRequest, flight: FlightLog, smap, states: tuple[str, .
 
     with_samples = sorted(s for s, rows in flight.samples.items() if rows)
     if req.sysid is None and len(with_samples) > 1:
-        raise UserError(f"{req.log}: the log holds samples of vehicles {', '.join(map(str, with_samples))}: choose "
-                        "one with --sysid")
+        raise UserError(
+            f"{req.log}: the log holds samples of vehicles {', '.join(map(str, with_samples))}: choose one with --sysid"
+        )
     candidates = [req.sysid] if req.sysid is not None else (with_samples or sorted(flight.seen) or [])
     if not candidates:
         why = explain_missing(flight.inventory, smap, (*states, *smap.actuator)) or "no message the signal map reads"
@@ -257,13 +286,17 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
 
         kept = load_plant(req.air_only).physical
         if kept.continuous is None or not kept.signals:
-            raise UserError(f"--air-only {req.air_only}: needs a continuous plant with a [signals] table (one "
-                            "written by identify)")
+            raise UserError(
+                f"--air-only {req.air_only}: needs a continuous plant with a [signals] table (one written by identify)"
+            )
         states = tuple(kept.signals.get("outputs", ()))
         req = dataclasses.replace(req, signals=req.air_only, h=kept.h)
     if dlog is not None and req.signals is None:
-        hints = "; ".join(dlog.inventory.providers(("angle of attack", "body rates (gyro)", "attitude", "airspeed",
-                                                     "actuator output")))
+        hints = "; ".join(
+            dlog.inventory.providers(
+                ("angle of attack", "body rates (gyro)", "attitude", "airspeed", "actuator output")
+            )
+        )
         raise UserError(f"{req.log}: {dlog.layouts.no_map()}; the log has {hints}")
     table, source = _signals_table(req.signals)
     smap, written = map_for(table, source, states, dlog.layouts if dlog is not None else None)
@@ -271,8 +304,14 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
     h = h_read * ratio
 
     started = time.perf_counter()
-    flight = read_flight(req.log, smap, h_read, req.sysid,
-                         progress=lambda f, n: say(f"{f:.0%} of {req.log}, {n} samples"), dataflash=dlog)
+    flight = read_flight(
+        req.log,
+        smap,
+        h_read,
+        req.sysid,
+        progress=lambda f, n: say(f"{f:.0%} of {req.log}, {n} samples"),
+        dataflash=dlog,
+    )
     sysid = _vehicle(req, flight, smap, states)
     reason = _missing_signals(flight, sysid, smap, states, req.model)
     if reason:
@@ -281,42 +320,65 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
     if not rows:
         from monitor.link.log_inventory import why_no_samples
 
-        raise UserError(f"{req.log}: no sample of sysid {sysid} could be assembled: "
-                        + why_no_samples(flight.inventory, smap, (*states, *smap.actuator), sysid, h_read))
+        raise UserError(
+            f"{req.log}: no sample of sysid {sysid} could be assembled: "
+            + why_no_samples(flight.inventory, smap, (*states, *smap.actuator), sysid, h_read)
+        )
     actuator = written["actuator"][0]
     if ratio > 1:
         rows = _decimate(rows, ratio, actuator)
     k = np.array([r[0] for r in rows], dtype=np.int64)
     X = np.array([[v.get(s, math.nan) for s in states] for _k, v in rows], dtype=float).reshape(len(rows), len(states))
     U = np.array([[v.get(actuator, math.nan)] for _k, v in rows], dtype=float).reshape(len(rows), 1)
-    units = tuple(str(written["measured"][s].get("unit", "")) if isinstance(written["measured"][s], dict) else ""
-                  for s in states)
+    units = tuple(
+        str(written["measured"][s].get("unit", "")) if isinstance(written["measured"][s], dict) else "" for s in states
+    )
     if kept is not None:
         return _measure_air(req, kept, k, X, U, states, sysid)
     if flight.records >= _LONG_LOG_RECORDS:
-        say(f"{len(rows)} samples of sysid {sysid} read in {time.perf_counter() - started:.1f} s; fitting and "
-            "validating")
-    result = identify(FlightData(h=h, k=k, states=X, inputs=U, state_names=states, input_names=(actuator,),
-                                 state_units=units))
+        say(
+            f"{len(rows)} samples of sysid {sysid} read in {time.perf_counter() - started:.1f} s; fitting and "
+            "validating"
+        )
+    result = identify(
+        FlightData(h=h, k=k, states=X, inputs=U, state_names=states, input_names=(actuator,), state_units=units)
+    )
     seconds = time.perf_counter() - started
 
     out = Path(req.out)
     name = req.plant_name
     custom_limit = req.actuator_limit != DEFAULT_ACTUATOR_LIMIT
-    limit_source = ("given with --actuator-limit" if custom_limit else
-                    "a safe default: a log shows the deflections flown, not the stops; check them")
-    header = [f"Identified by fault-monitor identify from {Path(req.log).name} (sysid {sysid}), model {req.model}.",
-              "States are deviations from [signals] operating_point, in "
-              + ", ".join(f"{s_} {u}".rstrip() for s_, u in zip(states, units)) + f"; input: {actuator} deg.",
-              "D_cf = B_c (an elevator fault); D_cd = the alpha column of A_c (a vertical gust as an alpha "
-              "disturbance, deg)."]
-    description = (f"{req.model} model identified from {Path(req.log).name}: {result.samples} samples at "
-                   f"h = {h:g} s, held-out fit "
-                   + ", ".join(f"{s} {f:.1f} %" for s, f in result.fit_validation.items()))
-    text = plant_toml(result, name=name, description=description, tau_min=req.tau_min, tau_max=tau_max,
-                      turbulence=req.turbulence,
-                      actuator_limit=req.actuator_limit, actuator_limit_source=limit_source, signals=written,
-                      source_log=str(req.log), model=req.model, header=header)
+    limit_source = (
+        "given with --actuator-limit"
+        if custom_limit
+        else "a safe default: a log shows the deflections flown, not the stops; check them"
+    )
+    header = [
+        f"Identified by fault-monitor identify from {Path(req.log).name} (sysid {sysid}), model {req.model}.",
+        "States are deviations from [signals] operating_point, in "
+        + ", ".join(f"{s_} {u}".rstrip() for s_, u in zip(states, units))
+        + f"; input: {actuator} deg.",
+        "D_cf = B_c (an elevator fault); D_cd = the alpha column of A_c (a vertical gust as an alpha "
+        "disturbance, deg).",
+    ]
+    description = (
+        f"{req.model} model identified from {Path(req.log).name}: {result.samples} samples at "
+        f"h = {h:g} s, held-out fit " + ", ".join(f"{s} {f:.1f} %" for s, f in result.fit_validation.items())
+    )
+    text = plant_toml(
+        result,
+        name=name,
+        description=description,
+        tau_min=req.tau_min,
+        tau_max=tau_max,
+        turbulence=req.turbulence,
+        actuator_limit=req.actuator_limit,
+        actuator_limit_source=limit_source,
+        signals=written,
+        source_log=str(req.log),
+        model=req.model,
+        header=header,
+    )
     parse_plant(text, source=str(out))  # the file must load as it is: a plant the chain takes
     try:
         write_text_atomically(out, text)
@@ -336,8 +398,9 @@ def _measure_air(req: IdentifyRequest, kept, k, X, U, states, sysid: int):
     from monitor.model.plant_toml import disturbance_table
 
     smap = parse_signals(kept.signals, kept.source, len(states), kept.m)  # the kept plant's operating point
-    gust = gust_from_residual(k, X - np.array(smap.y0), U - np.array(smap.u0), kept.A, kept.B0 + kept.B1, states,
-                              kept.h)
+    gust = gust_from_residual(
+        k, X - np.array(smap.y0), U - np.array(smap.u0), kept.A, kept.B0 + kept.B1, states, kept.h
+    )
     if gust is None:
         raise UserError(f"{req.log}: too few consecutive samples (or no alpha) to measure the gust")
     assert req.air_only is not None  # kept is the --air-only plant
@@ -372,9 +435,14 @@ class AirMeasured:
         return f"gust sigma {self.gust['sigma']:.4g} deg, time constant {self.gust['time_constant']:.3g} s"
 
     def report(self) -> dict[str, Any]:
-        return {"source_log": str(self.request.log), "sysid": self.sysid, "out": str(self.request.out),
-                "kept_model": str(self.request.air_only), "disturbance": self.gust,
-                "turbulence": self.request.turbulence}
+        return {
+            "source_log": str(self.request.log),
+            "sysid": self.sysid,
+            "out": str(self.request.out),
+            "kept_model": str(self.request.air_only),
+            "disturbance": self.gust,
+            "turbulence": self.request.turbulence,
+        }
 
 
 Rows = list[tuple[int, dict[str, float]]]

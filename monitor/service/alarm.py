@@ -30,7 +30,8 @@ class AlarmConfig:
         if not self.threshold > 0 or not 0 <= self.clear <= self.threshold or self.samples < 1:
             raise ValueError(
                 f"alarm needs threshold > 0, 0 <= clear <= threshold and samples >= 1 "
-                f"(got threshold={self.threshold}, clear={self.clear}, samples={self.samples})")
+                f"(got threshold={self.threshold}, clear={self.clear}, samples={self.samples})"
+            )
 
 
 DEFAULT_ALARM = AlarmConfig()

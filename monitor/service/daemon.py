@@ -27,9 +27,9 @@ from typing import Any
 from monitor.link.signing import Signer
 from monitor.link.transports import ConnectionSpec, Link, open_link
 from monitor.service.alarm import AlarmConfig
+from monitor.service.fleet_file import Fleet
 from monitor.service.pipeline import Pipeline
 from monitor.service.records import TruthRecord
-from monitor.service.fleet_file import Fleet
 from monitor.service.vehicles import VehicleTable
 
 __all__ = ["MonitorConfig", "build_pipeline", "run_daemon", "default_name"]
@@ -68,8 +68,9 @@ class MonitorConfig:
 
 
 def build_pipeline(config: MonitorConfig, publisher=None, recorder=None) -> Pipeline:
-    table = VehicleTable(config.fleet, config.alarm, config.vehicle_timeout, observe=config.observe,
-                         wait_s=config.assembly_wait)
+    table = VehicleTable(
+        config.fleet, config.alarm, config.vehicle_timeout, observe=config.observe, wait_s=config.assembly_wait
+    )
     return Pipeline(table, gcs_feedback=config.gcs_feedback, publisher=publisher, recorder=recorder)
 
 
@@ -77,8 +78,17 @@ def _on_truth(recorder, payload: bytes) -> None:
     """A ``<prefix>/<sysid>/truth`` sample from the simulator, recorded next to the estimates."""
     try:
         d = json.loads(payload)
-        recorder.submit_truth(TruthRecord(sysid=int(d["sysid"]), k=int(d["k"]), t=float(d["t"]), x=list(d["x"]),
-                                          f=list(d["f"]), d=list(d.get("d") or []), tau=d.get("tau")))
+        recorder.submit_truth(
+            TruthRecord(
+                sysid=int(d["sysid"]),
+                k=int(d["k"]),
+                t=float(d["t"]),
+                x=list(d["x"]),
+                f=list(d["f"]),
+                d=list(d.get("d") or []),
+                tau=d.get("tau"),
+            )
+        )
     except Exception as exc:  # someone else's bad payload is not our crash
         log.debug("ignoring a truth sample: %s", exc)
 
@@ -130,9 +140,16 @@ async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
             await link.start()
             links.append(link)
         mode = "observe-only" if config.observe else "closed loop"
-        log.info("ready: %s; MAVLink %s; Zenoh %s, key prefix '%s', name '%s'%s%s", mode,
-                 ", ".join(link.local for link in links), config.zenoh_endpoints or "(config file)", config.prefix,
-                 config.name, _recording_outputs(config), _operating_points(config))
+        log.info(
+            "ready: %s; MAVLink %s; Zenoh %s, key prefix '%s', name '%s'%s%s",
+            mode,
+            ", ".join(link.local for link in links),
+            config.zenoh_endpoints or "(config file)",
+            config.prefix,
+            config.name,
+            _recording_outputs(config),
+            _operating_points(config),
+        )
         for link in links:
             link.heartbeat()
         next_housekeeping = time.monotonic() + 1.0
@@ -173,13 +190,15 @@ def run_daemon(config: MonitorConfig, zenoh_config) -> int:
 
             recorder = RrdRecorder(config.rrd, properties=config.rrd_properties, live=config.live_urls)
         units = {m.plant.unit for m in config.fleet.models()}
-        publisher = EstimatePublisher(session, config.prefix, config.name, unit=next(iter(units), "deg"),
-                                      queue_max=config.queue_max)
+        publisher = EstimatePublisher(
+            session, config.prefix, config.name, unit=next(iter(units), "deg"), queue_max=config.queue_max
+        )
         pipeline = build_pipeline(config, publisher, recorder)
         if config.truth and recorder is not None:
             rec = recorder
-            truth_sub = session.declare_subscriber(f"{config.prefix.rstrip('/')}/*/truth",
-                                                   lambda sample: _on_truth(rec, sample.payload.to_bytes()))
+            truth_sub = session.declare_subscriber(
+                f"{config.prefix.rstrip('/')}/*/truth", lambda sample: _on_truth(rec, sample.payload.to_bytes())
+            )
         asyncio.run(_serve(config, pipeline))
         log.info("stopped: %s", pipeline.summary())
     finally:
@@ -192,4 +211,3 @@ def run_daemon(config: MonitorConfig, zenoh_config) -> int:
         log.error("the recording %s is incomplete: %s", config.rrd, recorder.error)
         return 1
     return 0
-

@@ -40,8 +40,13 @@ class VehicleModel:
         return self.plant.h
 
 
-def load_model(plant_spec: str | Path, gains_path: str | Path, force: bool = False,
-               signals_file: str | Path | None = None, layouts: Layouts = MAVLINK) -> VehicleModel:
+def load_model(
+    plant_spec: str | Path,
+    gains_path: str | Path,
+    force: bool = False,
+    signals_file: str | Path | None = None,
+    layouts: Layouts = MAVLINK,
+) -> VehicleModel:
     """Load and cross-check a plant and its gains; a plant-hash mismatch is a UserError unless ``force``.
 
     ``layouts``: where the signal map's message names are looked up (a DataFlash log's own, for ``analyse``)."""
@@ -50,8 +55,10 @@ def load_model(plant_spec: str | Path, gains_path: str | Path, force: bool = Fal
     gains.check_plant(plant)
     designed_for = gains.meta.get("plant_hash")
     if designed_for != plant.digest:
-        what = (f"{gains_path}: designed for plant {designed_for or '(no hash recorded)'}, "
-                f"not for {plant_spec} ({plant.digest})")
+        what = (
+            f"{gains_path}: designed for plant {designed_for or '(no hash recorded)'}, "
+            f"not for {plant_spec} ({plant.digest})"
+        )
         if not force:
             raise UserError(f"{what}; use --force to run it anyway")
         log.warning("%s; running anyway (--force)", what)
@@ -60,10 +67,16 @@ def load_model(plant_spec: str | Path, gains_path: str | Path, force: bool = Fal
     if limit is not None:
         for name, u0 in zip(signals.actuator, signals.u0):
             if not abs(u0) < limit:
-                raise UserError(f"{signals.source}: [signals] operating_point: '{name}' = {u0:g} is not inside the "
-                                f"actuator limit +-{limit:g} of plant {plant.name}")
-    return VehicleModel(plant, gains, Estimator(plant, gains.gains, u0=signals.u0,
-                                                fault_time_constant=gains.fault_time_constant), signals)
+                raise UserError(
+                    f"{signals.source}: [signals] operating_point: '{name}' = {u0:g} is not inside the "
+                    f"actuator limit +-{limit:g} of plant {plant.name}"
+                )
+    return VehicleModel(
+        plant,
+        gains,
+        Estimator(plant, gains.gains, u0=signals.u0, fault_time_constant=gains.fault_time_constant),
+        signals,
+    )
 
 
 class Fleet:

@@ -31,8 +31,15 @@ from typing import Any
 from monitor.errors import UserError
 from monitor.service.rrd_stream import StreamWriter, default_blueprint, open_stream
 
-__all__ = ["LIVE_QUEUE_MAX", "SPAWN_PORT", "LiveSink", "find_viewer", "parse_viewer_url", "spawn_viewer",
-           "viewer_answers"]
+__all__ = [
+    "LIVE_QUEUE_MAX",
+    "SPAWN_PORT",
+    "LiveSink",
+    "find_viewer",
+    "parse_viewer_url",
+    "spawn_viewer",
+    "viewer_answers",
+]
 
 log = logging.getLogger(__name__)
 
@@ -75,8 +82,10 @@ def find_viewer(search_path: str | None = None) -> str:
     else:
         found = shutil.which("rerun") or shutil.which("rerun", path=str(Path(sys.executable).parent))
     if found is None:
-        raise UserError("--rerun-spawn: no 'rerun' viewer executable found on PATH (pip install rerun-sdk "
-                        "provides it); or start a viewer yourself and give --rerun-url")
+        raise UserError(
+            "--rerun-spawn: no 'rerun' viewer executable found on PATH (pip install rerun-sdk "
+            "provides it); or start a viewer yourself and give --rerun-url"
+        )
     return found
 
 
@@ -101,9 +110,14 @@ def spawn_viewer(executable: str, port: int = SPAWN_PORT) -> str:
         log.info("a viewer already listens at %s: streaming to it instead of spawning another", url)
         return url
     try:
-        proc = subprocess.Popen([executable, "--bind", "127.0.0.1", "--port", str(port), "--expect-data-soon"],
-                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                start_new_session=True, env={**os.environ, "RERUN_APP_ONLY": "true"})
+        proc = subprocess.Popen(
+            [executable, "--bind", "127.0.0.1", "--port", str(port), "--expect-data-soon"],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+            env={**os.environ, "RERUN_APP_ONLY": "true"},
+        )
     except OSError as exc:
         raise UserError(f"--rerun-spawn: cannot start {executable}: {exc.strerror or exc}") from None
     # wait (bounded) until it listens, so the sink's first probe finds it and a viewer that cannot start
@@ -117,8 +131,10 @@ def spawn_viewer(executable: str, port: int = SPAWN_PORT) -> str:
     except subprocess.TimeoutExpired:
         code = None
     if code is not None:
-        raise UserError(f"--rerun-spawn: the viewer {executable} exited with code {code} at once (no display? "
-                        "run `rerun` to see why, or start a viewer elsewhere and give --rerun-url)")
+        raise UserError(
+            f"--rerun-spawn: the viewer {executable} exited with code {code} at once (no display? "
+            "run `rerun` to see why, or start a viewer elsewhere and give --rerun-url)"
+        )
     log.info("spawned a Rerun viewer (%s, pid %d) at %s", executable, proc.pid, url)
     return url
 
@@ -126,9 +142,19 @@ def spawn_viewer(executable: str, port: int = SPAWN_PORT) -> str:
 class LiveSink(StreamWriter):
     """One live viewer: connect when it answers, drop the oldest records when it is behind or away."""
 
-    def __init__(self, url: str, application_id: str, recording_id: str, properties: dict[str, str],
-                 recording_name: str, *, maxlen: int = LIVE_QUEUE_MAX, probe_s: float = PROBE_S,
-                 max_age_s: float = LIVE_MAX_AGE_S, **policy: Any) -> None:
+    def __init__(
+        self,
+        url: str,
+        application_id: str,
+        recording_id: str,
+        properties: dict[str, str],
+        recording_name: str,
+        *,
+        maxlen: int = LIVE_QUEUE_MAX,
+        probe_s: float = PROBE_S,
+        max_age_s: float = LIVE_MAX_AGE_S,
+        **policy: Any,
+    ) -> None:
         super().__init__(url, maxlen=maxlen, max_age_s=max_age_s, **policy)
         self.url = url
         self.host, self.port = parse_viewer_url(url)
@@ -151,8 +177,11 @@ class LiveSink(StreamWriter):
     def join(self, timeout_s: float) -> None:
         self._thread.join(timeout_s)
         if self._thread.is_alive():
-            log.warning("live viewer %s: still sending after %.1f s at close; left behind (the file is complete)",
-                        self.url, timeout_s)
+            log.warning(
+                "live viewer %s: still sending after %.1f s at close; left behind (the file is complete)",
+                self.url,
+                timeout_s,
+            )
 
     # -- the sink's thread ----------------------------------------------------------------------------
 
@@ -199,13 +228,18 @@ class LiveSink(StreamWriter):
         self.connections += 1
         self._dropped_seen = self.stats["dropped"]
         self._warned = False
-        log.info("streaming to the live viewer at %s%s", self.url,
-                 f" (again; {self._dropped_seen} samples dropped for it so far)" if self.connections > 1 else "")
+        log.info(
+            "streaming to the live viewer at %s%s",
+            self.url,
+            f" (again; {self._dropped_seen} samples dropped for it so far)" if self.connections > 1 else "",
+        )
 
     def _lose(self, reason: str) -> None:
         rec, self._rec = self._rec, None
-        self._warn(f"live viewer {self.url} {reason}; its newest {self._pending.maxlen} samples are kept until it "
-                   "answers again (the recording file is not affected)")
+        self._warn(
+            f"live viewer {self.url} {reason}; its newest {self._pending.maxlen} samples are kept until it "
+            "answers again (the recording file is not affected)"
+        )
         if rec is not None:
             try:
                 rec.disconnect()
@@ -243,5 +277,10 @@ class LiveSink(StreamWriter):
                 rec.disconnect()
             except Exception as exc:  # noqa: BLE001
                 log.warning("live viewer %s: the last samples may be missing (%s)", self.url, exc)
-        log.info("live viewer %s: %d records sent, %d dropped, %d unsent", self.url, self.stats["written"],
-                 self.stats["dropped"], len(self._pending))
+        log.info(
+            "live viewer %s: %d records sent, %d dropped, %d unsent",
+            self.url,
+            self.stats["written"],
+            self.stats["dropped"],
+            len(self._pending),
+        )

@@ -12,17 +12,18 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from monitor.link.frames import FrameParser
 from monitor.link.log_inventory import LogInventory
 from monitor.link.tlog import TlogStats, read_tlog
 from monitor.service.alarm import AlarmConfig
+from monitor.service.fleet_file import Fleet
 from monitor.service.pipeline import Pipeline
 from monitor.service.records import SampleRecord
-from monitor.service.fleet_file import Fleet
 from monitor.service.vehicles import VehicleTable
 
 __all__ = ["LogAnalysis", "analyse_log", "analyse_dataflash"]
@@ -59,8 +60,15 @@ class LogAnalysis:
     inventory: LogInventory = field(default_factory=LogInventory)
 
 
-def analyse_log(path: str | Path, fleet: Fleet, alarm: AlarmConfig, sysid: int | None = None, recorder=None,
-                progress: Callable[[float, int], None] | None = None, progress_every_s: float = 2.0) -> LogAnalysis:
+def analyse_log(
+    path: str | Path,
+    fleet: Fleet,
+    alarm: AlarmConfig,
+    sysid: int | None = None,
+    recorder=None,
+    progress: Callable[[float, int], None] | None = None,
+    progress_every_s: float = 2.0,
+) -> LogAnalysis:
     """Run the observer over every sample of the log (only ``sysid``'s if given)."""
     start = time.perf_counter()
     table = VehicleTable(fleet, alarm, timeout=float("inf"), observe=True)
@@ -101,13 +109,29 @@ def analyse_log(path: str | Path, fleet: Fleet, alarm: AlarmConfig, sysid: int |
                 progress(position / size, len(collect.records))
     if last is not None:
         pipeline.flush(last * 1e-6, last * 1e-6)
-    return LogAnalysis(collect.records, pipeline.counts(), stats.records, stats.skipped_bytes, stats.truncated,
-                       time.perf_counter() - start, first, last, {"commands_in_log": commands}, inventory)
+    return LogAnalysis(
+        collect.records,
+        pipeline.counts(),
+        stats.records,
+        stats.skipped_bytes,
+        stats.truncated,
+        time.perf_counter() - start,
+        first,
+        last,
+        {"commands_in_log": commands},
+        inventory,
+    )
 
 
-def analyse_dataflash(dlog, fleet: Fleet, alarm: AlarmConfig, sysid: int | None = None, recorder=None,
-                      progress: Callable[[float, int], None] | None = None,
-                      progress_every_s: float = 2.0) -> LogAnalysis:
+def analyse_dataflash(
+    dlog,
+    fleet: Fleet,
+    alarm: AlarmConfig,
+    sysid: int | None = None,
+    recorder=None,
+    progress: Callable[[float, int], None] | None = None,
+    progress_every_s: float = 2.0,
+) -> LogAnalysis:
     """The same observer over an ArduPilot DataFlash log (``monitor.link.dataflash.DataFlashLog``): its records
     of the messages the signal maps name, by name, with TimeUS as the clock; one vehicle (sysid 1 or ``sysid``)."""
     from monitor.link.dataflash import DATAFLASH_SYSID, wanted_fields
@@ -136,6 +160,15 @@ def analyse_dataflash(dlog, fleet: Fleet, alarm: AlarmConfig, sysid: int | None 
             progress(n / total, len(collect.records))
     if last is not None:
         pipeline.flush(last * 1e-6, last * 1e-6)
-    return LogAnalysis(collect.records, pipeline.counts(), dlog.inventory.records, 0, False,
-                       time.perf_counter() - start, first, last, {"dataflash_records_read": dlog.records_read},
-                       dlog.inventory)
+    return LogAnalysis(
+        collect.records,
+        pipeline.counts(),
+        dlog.inventory.records,
+        0,
+        False,
+        time.perf_counter() - start,
+        first,
+        last,
+        {"dataflash_records_read": dlog.records_read},
+        dlog.inventory,
+    )

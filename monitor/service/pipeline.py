@@ -58,8 +58,15 @@ class MessageCounters:
 class Pipeline:
     """Frames -> vehicle table -> estimator -> command, feedback, Zenoh, recorder."""
 
-    def __init__(self, table: VehicleTable, *, send_commands: bool = True, gcs_feedback: bool = True,
-                 publisher=None, recorder=None) -> None:
+    def __init__(
+        self,
+        table: VehicleTable,
+        *,
+        send_commands: bool = True,
+        gcs_feedback: bool = True,
+        publisher=None,
+        recorder=None,
+    ) -> None:
         self.table = table
         self.send_commands = send_commands and not table.observe
         self.gcs_feedback = gcs_feedback
@@ -79,8 +86,14 @@ class Pipeline:
                     self._wanted[layout.msgid] = (layout.name, layout)
 
     # --- hot path ------------------------------------------------------------------------------------
-    def on_frames(self, route: tuple | None, frames: list[RawFrame], t0_ns: int, now: float | None = None,
-                  wall: float | None = None) -> None:
+    def on_frames(
+        self,
+        route: tuple | None,
+        frames: list[RawFrame],
+        t0_ns: int,
+        now: float | None = None,
+        wall: float | None = None,
+    ) -> None:
         """Frames of one read. On a datagram link at most one sample per vehicle is processed per datagram
         and at most ``MAX_FRAMES_PER_DATAGRAM`` frames are looked at: one packet must not buy many answers."""
         if now is None:
@@ -152,13 +165,32 @@ class Pipeline:
                 link.send(out, peer)
         raised = vehicle.alarm.raised
         if self.publisher is not None:
-            self.publisher.estimate((vehicle.sysid, r.k, p.t, r.f_hat, r.x_hat, r.residual, p.u_abs, p.tau_obs, raised,
-                                     p.command_applied, vehicle.commands_effective))
+            self.publisher.estimate(
+                (
+                    vehicle.sysid,
+                    r.k,
+                    p.t,
+                    r.f_hat,
+                    r.x_hat,
+                    r.residual,
+                    p.u_abs,
+                    p.tau_obs,
+                    raised,
+                    p.command_applied,
+                    vehicle.commands_effective,
+                )
+            )
             if p.alarm_event is not None:
                 self.publisher.alarm(vehicle.sysid, r.k, p.t, p.alarm_event, r.f_hat)
         if p.alarm_event is not None:
-            log.info("vehicle %d: alarm %s at k=%d (|f_hat| = %.3g %s)", vehicle.sysid, p.alarm_event, r.k, p.f_mag,
-                     vehicle.model.plant.unit)
+            log.info(
+                "vehicle %d: alarm %s at k=%d (|f_hat| = %.3g %s)",
+                vehicle.sysid,
+                p.alarm_event,
+                r.k,
+                p.f_mag,
+                vehicle.model.plant.unit,
+            )
         processing = (time.perf_counter_ns() - t0_ns) * 1e-9
         self.processing_s.append(processing)
         if self.recorder is not None:
@@ -169,10 +201,24 @@ class Pipeline:
         r, values = p.result, p.sample.values
         sig = p.vehicle.model.signals
         elevator = values.get(sig.actuator[0]) if sig.actuator else None
-        return SampleRecord(sysid=p.vehicle.sysid, k=r.k, t=p.t, wall=wall, y=p.y, alpha=values.get("alpha"),
-                            q=values.get("q"), elevator=elevator, x_hat=r.x_hat.tolist(), f_hat=r.f_hat.tolist(),
-                            u=r.u.tolist(), residual=r.residual.tolist(), tau_obs=p.tau_obs, processing_s=processing,
-                            alarm=p.vehicle.alarm.raised, run=p.vehicle.run)
+        return SampleRecord(
+            sysid=p.vehicle.sysid,
+            k=r.k,
+            t=p.t,
+            wall=wall,
+            y=p.y,
+            alpha=values.get("alpha"),
+            q=values.get("q"),
+            elevator=elevator,
+            x_hat=r.x_hat.tolist(),
+            f_hat=r.f_hat.tolist(),
+            u=r.u.tolist(),
+            residual=r.residual.tolist(),
+            tau_obs=p.tau_obs,
+            processing_s=processing,
+            alarm=p.vehicle.alarm.raised,
+            run=p.vehicle.run,
+        )
 
     # --- housekeeping and reporting -----------------------------------------------------------------
     def warn_frames(self) -> bool:
@@ -181,13 +227,22 @@ class Pipeline:
         if self.warned_v1 or not self.frames.v1_refused:
             return False
         self.warned_v1 = True
-        log.warning("MAVLink 1 frames refused (%d so far): the links are signed (--signing-key) and MAVLink 1 cannot "
-                    "be signed; set the sender to MAVLink 2 (ArduPilot: SERIALn_PROTOCOL = 2)", self.frames.v1_refused)
+        log.warning(
+            "MAVLink 1 frames refused (%d so far): the links are signed (--signing-key) and MAVLink 1 cannot "
+            "be signed; set the sender to MAVLink 2 (ArduPilot: SERIALn_PROTOCOL = 2)",
+            self.frames.v1_refused,
+        )
         return True
 
     def counts(self) -> dict[str, int]:
-        out = {**self.frames.as_dict(), **self.messages.as_dict(), **self.table.assembly_totals(),
-               **self.table.counters.as_dict(), "commands": self.commands_sent, "feedback": self.feedback_sent}
+        out = {
+            **self.frames.as_dict(),
+            **self.messages.as_dict(),
+            **self.table.assembly_totals(),
+            **self.table.counters.as_dict(),
+            "commands": self.commands_sent,
+            "feedback": self.feedback_sent,
+        }
         if self.publisher is not None:
             out.update(published=self.publisher.published, publish_drops=self.publisher.dropped)
         return out
@@ -195,13 +250,47 @@ class Pipeline:
     def summary(self) -> str:
         c = self.counts()
         p50, p99 = percentile(self.processing_s, 50), percentile(self.processing_s, 99)
-        timing = (f"processing p50 {p50 * 1e6:.0f} us, p99 {p99 * 1e6:.0f} us"
-                  if p50 is not None and p99 is not None else "no processing times")
-        order = ("processed", "duplicates", "stale", "incomplete", "held_missing", "late_parts", "waited_out",
-                 "no_report", "not_applied", "rejected_values", "future", "foreign_source", "excess", "frames_v1",
-                 "garbage", "truncated", "bad_signature", "v1_refused", "wrong_dialect", "foreign", "refused", "skipped", "vehicles_seen",
-                 "restarts", "resets", "commands", "feedback", "published", "publish_drops")
-        names = {"processed": "samples processed", "vehicles_seen": "vehicles", "frames_v1": "MAVLink 1 frames",
-                 "v1_refused": "MAVLink 1 refused (signed link)"}
+        timing = (
+            f"processing p50 {p50 * 1e6:.0f} us, p99 {p99 * 1e6:.0f} us"
+            if p50 is not None and p99 is not None
+            else "no processing times"
+        )
+        order = (
+            "processed",
+            "duplicates",
+            "stale",
+            "incomplete",
+            "held_missing",
+            "late_parts",
+            "waited_out",
+            "no_report",
+            "not_applied",
+            "rejected_values",
+            "future",
+            "foreign_source",
+            "excess",
+            "frames_v1",
+            "garbage",
+            "truncated",
+            "bad_signature",
+            "v1_refused",
+            "wrong_dialect",
+            "foreign",
+            "refused",
+            "skipped",
+            "vehicles_seen",
+            "restarts",
+            "resets",
+            "commands",
+            "feedback",
+            "published",
+            "publish_drops",
+        )
+        names = {
+            "processed": "samples processed",
+            "vehicles_seen": "vehicles",
+            "frames_v1": "MAVLink 1 frames",
+            "v1_refused": "MAVLink 1 refused (signed link)",
+        }
         parts = [f"{names.get(key, key.replace('_', ' '))} {c[key]}" for key in order if key in c]
         return ", ".join(parts) + f"; {timing}"

@@ -14,10 +14,10 @@ newest estimate, dropped from the stream or not, because the loop stores it befo
 
 from __future__ import annotations
 
+import collections
 import json
 import logging
 import math
-import collections
 import threading
 import time
 from typing import Any
@@ -47,9 +47,20 @@ def estimate_payload(item: EstimateItem, unit: str) -> dict[str, Any]:
     report; null when it cannot be told) and ``commands_effective`` (false while most recent ones did not).
     """
     sysid, k, t, f_hat, x_hat, residual, u, tau, alarm, applied, effective = item
-    return {"sysid": sysid, "k": k, "t": t, "f_hat": _finite(f_hat), "x_hat": _finite(x_hat),
-            "residual": _finite(residual), "u": _finite(u), "tau": tau, "alarm": alarm, "unit": unit,
-            "command_applied": applied, "commands_effective": effective}
+    return {
+        "sysid": sysid,
+        "k": k,
+        "t": t,
+        "f_hat": _finite(f_hat),
+        "x_hat": _finite(x_hat),
+        "residual": _finite(residual),
+        "u": _finite(u),
+        "tau": tau,
+        "alarm": alarm,
+        "unit": unit,
+        "command_applied": applied,
+        "commands_effective": effective,
+    }
 
 
 def alarm_payload(sysid: int, k: int, t: float, state: str, f_hat) -> dict[str, Any]:
@@ -60,8 +71,15 @@ def alarm_payload(sysid: int, k: int, t: float, state: str, f_hat) -> dict[str, 
 class EstimatePublisher:
     """Owns the monitor's Zenoh entities (not the session) and the publisher thread."""
 
-    def __init__(self, session: zenoh.Session, prefix: str, name: str, unit: str = "deg",
-                 queue_max: int = 10_000, poll_s: float = 0.002) -> None:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        prefix: str,
+        name: str,
+        unit: str = "deg",
+        queue_max: int = 10_000,
+        poll_s: float = 0.002,
+    ) -> None:
         self.session = session
         self.prefix = prefix.rstrip("/")
         self.unit = unit
@@ -88,8 +106,11 @@ class EstimatePublisher:
             now = time.monotonic()
             if now - self._last_drop_log > 5.0:
                 self._last_drop_log = now
-                log.warning("Zenoh publisher behind: %d estimates dropped so far (queue of %d full)",
-                            self.dropped, self.queue_max)
+                log.warning(
+                    "Zenoh publisher behind: %d estimates dropped so far (queue of %d full)",
+                    self.dropped,
+                    self.queue_max,
+                )
             return
         self._queue.append(item)
 
@@ -101,7 +122,8 @@ class EstimatePublisher:
         pub = self._publishers.get(key)
         if pub is None:
             pub = self._publishers[key] = self.session.declare_publisher(
-                key, encoding=_JSON, congestion_control=zenoh.CongestionControl.BLOCK)
+                key, encoding=_JSON, congestion_control=zenoh.CongestionControl.BLOCK
+            )
         return pub
 
     def _run(self) -> None:

@@ -58,33 +58,44 @@ import threading
 import time
 import weakref
 from collections.abc import Sequence
-from typing import Any
 from pathlib import Path
-
+from typing import Any
 
 from monitor.errors import UserError
-from monitor.service.records import SampleRecord, TruthRecord
-
 from monitor.service.live_sinks import LiveSink, parse_viewer_url
+from monitor.service.records import SampleRecord, TruthRecord
 from monitor.service.rrd_stream import LAYOUT_VERSION, StreamWriter, default_blueprint, open_stream, software_versions
 
 __all__ = ["RrdRecorder"]  # the layout and the stream writer are monitor.service.rrd_stream's
 
 log = logging.getLogger(__name__)
 
+
 class FileSink(StreamWriter):
     """The ``.rrd`` file: lossless (unbounded queue), and a write failure is the run's ``error``."""
 
-    def __init__(self, path: Path, application_id: str, recording_id: str, properties: dict[str, str],
-                 recording_name: str, **policy: Any) -> None:
+    def __init__(
+        self,
+        path: Path,
+        application_id: str,
+        recording_id: str,
+        properties: dict[str, str],
+        recording_name: str,
+        **policy: Any,
+    ) -> None:
         super().__init__(path.name, **policy)
         self.path = path
         self.error: str | None = None  # the first write failure, as one line (the daemon reports it)
         if self.path.is_dir() or not self.path.parent.is_dir():
             raise UserError(f"cannot write recording {self.path}: not a file in an existing directory")
         try:
-            self._rec = open_stream(application_id, recording_id, properties, recording_name,
-                                    lambda rec: rec.save(str(self.path), default_blueprint=default_blueprint(())))
+            self._rec = open_stream(
+                application_id,
+                recording_id,
+                properties,
+                recording_name,
+                lambda rec: rec.save(str(self.path), default_blueprint=default_blueprint(())),
+            )
         except (OSError, RuntimeError, ValueError) as exc:
             raise UserError(f"cannot write recording {self.path}: {exc}") from exc
         self._thread.start()
@@ -92,8 +103,9 @@ class FileSink(StreamWriter):
     def _after_drain(self, n: int) -> None:
         # Rerun writes the file from its own thread and reports a failure (disk full) only on flush: flush
         # here, in the writer thread, so that a failure is known within one batch, not at close
-        if self.error is None and not self._guard(f"writing {self.path} (disk full or file removed?)",
-                                                  lambda: self._rec.flush(timeout_sec=5.0)):
+        if self.error is None and not self._guard(
+            f"writing {self.path} (disk full or file removed?)", lambda: self._rec.flush(timeout_sec=5.0)
+        ):
             self.stats["failed"] += n
 
     def _fail_once(self, kind: str, message: str) -> None:
@@ -112,8 +124,12 @@ class FileSink(StreamWriter):
         self._update_blueprint(force=True)
         # Rerun's flush waits for its file writer, and on a full disk that wait had no end (a CI run hung in
         # close): the footer is written in a helper thread, and close gives up on it after ``timeout_s``
-        finisher = threading.Thread(target=self._guard, args=("close", lambda: self._finish(timeout_s)),
-                                    name=f"close {self.path.name}", daemon=True)
+        finisher = threading.Thread(
+            target=self._guard,
+            args=("close", lambda: self._finish(timeout_s)),
+            name=f"close {self.path.name}",
+            daemon=True,
+        )
         finisher.start()
         finisher.join(timeout_s + 1.0)
         if finisher.is_alive():
@@ -138,9 +154,18 @@ class RrdRecorder:
     leaves a complete file even when the caller forgets.
     """
 
-    def __init__(self, path: str | Path | None, application_id: str = "fault-monitor",
-                 properties: dict[str, str] | None = None, *, batch_size: int = 256, max_age_s: float = 0.5,
-                 poll_s: float = 0.01, recording_name: str | None = None, live: Sequence[str] = ()) -> None:
+    def __init__(
+        self,
+        path: str | Path | None,
+        application_id: str = "fault-monitor",
+        properties: dict[str, str] | None = None,
+        *,
+        batch_size: int = 256,
+        max_age_s: float = 0.5,
+        poll_s: float = 0.01,
+        recording_name: str | None = None,
+        live: Sequence[str] = (),
+    ) -> None:
         import uuid
 
         if live:  # every address checked before the file sink's thread starts
@@ -150,9 +175,20 @@ class RrdRecorder:
         props = {"layout": LAYOUT_VERSION, **software_versions(), **(properties or {})}
         name = recording_name or f"{application_id} {self.path.stem if self.path else 'live'}"
         recording_id = str(uuid.uuid4())
-        self._file = None if self.path is None else FileSink(
-            self.path, application_id, recording_id, props, name, batch_size=batch_size, max_age_s=max_age_s,
-            poll_s=poll_s)
+        self._file = (
+            None
+            if self.path is None
+            else FileSink(
+                self.path,
+                application_id,
+                recording_id,
+                props,
+                name,
+                batch_size=batch_size,
+                max_age_s=max_age_s,
+                poll_s=poll_s,
+            )
+        )
         self.live: list[LiveSink] = []
         if live:
             self.live = [LiveSink(url, application_id, recording_id, props, name) for url in live]

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from monitor.errors import UserError
+from monitor.service.records import SampleRecord, TruthRecord
 from monitor.service.rrd_stream import (
     PROPERTY_NAME,
     SAMPLE_SCALARS,
@@ -26,7 +27,6 @@ from monitor.service.rrd_stream import (
     TRUTH_SCALARS,
     TRUTH_VECTORS,
 )
-from monitor.service.records import SampleRecord, TruthRecord
 
 __all__ = ["VehicleSeries", "Recording", "load_recording"]
 

@@ -17,8 +17,8 @@ import platform
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from typing import TYPE_CHECKING, Any, cast
 from importlib import metadata
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -42,7 +42,9 @@ __all__ = [
     "default_blueprint",
 ]
 
-log = logging.getLogger("monitor.service.recorder")  # one logger for the whole recording: its messages predate the split
+log = logging.getLogger(
+    "monitor.service.recorder"
+)  # one logger for the whole recording: its messages predate the split
 
 LAYOUT_VERSION = "1"
 PROPERTY_NAME = "fault_monitor"
@@ -90,18 +92,21 @@ def software_versions() -> dict[str, str]:
     return out
 
 
-def recording_properties(plant: Plant, gains: Gains, method: str,
-                         gains_source: str | None = None) -> dict[str, str]:
+def recording_properties(plant: Plant, gains: Gains, method: str, gains_source: str | None = None) -> dict[str, str]:
     """The plant and gains a recording was made with, as recording properties (matrices as JSON rows).
 
     For ``RrdRecorder(properties=...)``: a recording must say which model and gains produced its
     estimates, or it cannot be re-scored or reproduced later.
     """
     props = {
-        "plant_name": plant.name, "plant_source": plant.source, "plant_hash": plant.digest,
-        "plant_h_s": repr(plant.h), "plant_tau_s": f"[{plant.tau_min!r}, {plant.tau_max!r}]",
+        "plant_name": plant.name,
+        "plant_source": plant.source,
+        "plant_hash": plant.digest,
+        "plant_h_s": repr(plant.h),
+        "plant_tau_s": f"[{plant.tau_min!r}, {plant.tau_max!r}]",
         "plant_unit": plant.unit,
-        "gains_method": method, "gains_source": gains_source or "",
+        "gains_method": method,
+        "gains_source": gains_source or "",
     }
     for name in ("L", "M", "K1", "K2", "K3"):
         props[f"gains_{name}"] = json.dumps(np.asarray(getattr(gains, name), dtype=float).tolist())
@@ -115,14 +120,17 @@ def default_blueprint(sysids: Iterable[int]):  # -> rerun.blueprint.Blueprint
     def vehicle(sysid: int):
         o = f"/vehicle/{sysid}"
         return rrb.Grid(
-            rrb.TimeSeriesView(origin=o, contents=[f"{o}/estimate/f_hat/**", f"{o}/truth/f/**"],
-                               name=f"#{sysid} f_hat vs true fault"),
+            rrb.TimeSeriesView(
+                origin=o, contents=[f"{o}/estimate/f_hat/**", f"{o}/truth/f/**"], name=f"#{sysid} f_hat vs true fault"
+            ),
             rrb.TimeSeriesView(origin=o, contents=[f"{o}/measured/alpha"], name=f"#{sysid} alpha (deg)"),
             rrb.TimeSeriesView(origin=o, contents=[f"{o}/measured/q"], name=f"#{sysid} q (deg/s)"),
-            rrb.TimeSeriesView(origin=o, contents=[f"{o}/command/u/**", f"{o}/measured/elevator"],
-                               name=f"#{sysid} u and elevator"),
-            rrb.TimeSeriesView(origin=o, contents=[f"{o}/timing/tau_obs", f"{o}/truth/tau"],
-                               name=f"#{sysid} delay (s)"),
+            rrb.TimeSeriesView(
+                origin=o, contents=[f"{o}/command/u/**", f"{o}/measured/elevator"], name=f"#{sysid} u and elevator"
+            ),
+            rrb.TimeSeriesView(
+                origin=o, contents=[f"{o}/timing/tau_obs", f"{o}/truth/tau"], name=f"#{sysid} delay (s)"
+            ),
             grid_columns=2,
             name=f"vehicle {sysid}",
         )
@@ -138,8 +146,9 @@ def default_blueprint(sysids: Iterable[int]):  # -> rerun.blueprint.Blueprint
     return rrb.Blueprint(root, rrb.TimePanel(timeline="sample"), collapse_panels=False)
 
 
-def _columns(records: Sequence[object], scalars: dict[str, tuple[str, float]],
-             vectors: dict[str, str]) -> Iterator[tuple[str, np.ndarray, np.ndarray]]:
+def _columns(
+    records: Sequence[object], scalars: dict[str, tuple[str, float]], vectors: dict[str, str]
+) -> Iterator[tuple[str, np.ndarray, np.ndarray]]:
     """Yield ``(relative path, row mask, values)`` per scalar entity; a ``None`` field leaves its row out.
 
     The common case (no ``None``, vectors of one width) goes through one ``np.array`` call per field:
@@ -175,13 +184,26 @@ def _columns(records: Sequence[object], scalars: dict[str, tuple[str, float]],
 def _scalar_field(entity: str) -> Any:
     import pyarrow as pa
 
-    return pa.field(f"{entity}:Scalars:scalars", pa.list_(pa.float64()), metadata={
-        "rerun:kind": "data", "rerun:entity_path": entity, "rerun:archetype": "rerun.archetypes.Scalars",
-        "rerun:component": "Scalars:scalars", "rerun:component_type": "rerun.components.Scalar"})
+    return pa.field(
+        f"{entity}:Scalars:scalars",
+        pa.list_(pa.float64()),
+        metadata={
+            "rerun:kind": "data",
+            "rerun:entity_path": entity,
+            "rerun:archetype": "rerun.archetypes.Scalars",
+            "rerun:component": "Scalars:scalars",
+            "rerun:component_type": "rerun.components.Scalar",
+        },
+    )
 
 
-def _record_batch(sysid: int, records: Sequence[SampleRecord | TruthRecord],
-                  scalars: dict[str, tuple[str, float]], vectors: dict[str, str], wall: bool) -> Any:
+def _record_batch(
+    sysid: int,
+    records: Sequence[SampleRecord | TruthRecord],
+    scalars: dict[str, tuple[str, float]],
+    vectors: dict[str, str],
+    wall: bool,
+) -> Any:
     """One vehicle's pending rows as ONE ``pyarrow.RecordBatch``: a column per entity, shared timelines.
 
     Why not ``send_columns`` per entity: its fixed cost (~150-250 us a call, most of it building the
@@ -218,8 +240,13 @@ def _by_sysid(records: Iterable[SampleRecord | TruthRecord]) -> dict[int, list]:
     return groups
 
 
-def open_stream(application_id: str, recording_id: str, properties: dict[str, str], recording_name: str,
-                attach: Callable[[Any], None]) -> Any:
+def open_stream(
+    application_id: str,
+    recording_id: str,
+    properties: dict[str, str],
+    recording_name: str,
+    attach: Callable[[Any], None],
+) -> Any:
     """A ``RecordingStream`` with its sink attached (``attach``), the recording properties and name sent.
 
     Every sink of one run gets its own stream with the same ``recording_id``, so a viewer that is shown
@@ -229,8 +256,9 @@ def open_stream(application_id: str, recording_id: str, properties: dict[str, st
 
     rec = rr.RecordingStream(application_id, recording_id=recording_id)
     attach(rec)
-    rec.send_property(PROPERTY_NAME, rr.AnyValues(drop_untyped_nones=True,
-                                                  **{k: str(v) for k, v in properties.items()}))
+    rec.send_property(
+        PROPERTY_NAME, rr.AnyValues(drop_untyped_nones=True, **{k: str(v) for k, v in properties.items()})
+    )
     rec.send_recording_name(recording_name)
     return rec
 
@@ -244,8 +272,15 @@ class StreamWriter:
     Subclasses set ``self._rec`` and decide what a failure means (``_fail_once``).
     """
 
-    def __init__(self, label: str, *, maxlen: int | None = None, batch_size: int = 256, max_age_s: float = 0.5,
-                 poll_s: float = 0.01) -> None:
+    def __init__(
+        self,
+        label: str,
+        *,
+        maxlen: int | None = None,
+        batch_size: int = 256,
+        max_age_s: float = 0.5,
+        poll_s: float = 0.01,
+    ) -> None:
         self.label = label
         self.batch_size = batch_size
         self.max_age_s = max_age_s
@@ -301,8 +336,7 @@ class StreamWriter:
     def _after_drain(self, n: int) -> None:
         """Hook: what a sink checks once a batch of ``n`` records went out."""
 
-    def _write(self, records: list, scalars: dict[str, tuple[str, float]], vectors: dict[str, str],
-               wall: bool) -> None:
+    def _write(self, records: list, scalars: dict[str, tuple[str, float]], vectors: dict[str, str], wall: bool) -> None:
         for sysid, recs in _by_sysid(records).items():
             ok = self._guard("write", lambda: self._write_vehicle(sysid, recs, scalars, vectors, wall))
             self.stats["written" if ok else "failed"] += len(recs)
@@ -310,8 +344,9 @@ class StreamWriter:
                 self._sysids.add(sysid)
             time.sleep(0)  # let the loop thread take the GIL between vehicles
 
-    def _write_vehicle(self, sysid: int, recs: list, scalars: dict[str, tuple[str, float]],
-                       vectors: dict[str, str], wall: bool) -> None:
+    def _write_vehicle(
+        self, sysid: int, recs: list, scalars: dict[str, tuple[str, float]], vectors: dict[str, str], wall: bool
+    ) -> None:
         batch = _record_batch(sysid, recs, scalars, vectors, wall)
         self._rec.send_record_batch(batch, index=[name for name in TIMELINES if name in batch.schema.names])
 
@@ -323,8 +358,9 @@ class StreamWriter:
             return
         if not force and self._blueprint_ids and time.monotonic() - self._blueprint_at < BLUEPRINT_EVERY_S:
             return
-        if self._guard("blueprint", lambda: self._rec.send_blueprint(default_blueprint(ids), make_active=True,
-                                                                      make_default=True)):
+        if self._guard(
+            "blueprint", lambda: self._rec.send_blueprint(default_blueprint(ids), make_active=True, make_default=True)
+        ):
             self._blueprint_ids, self._blueprint_at = ids, time.monotonic()
 
     def _guard(self, kind: str, fn: Callable[[], None]) -> bool:

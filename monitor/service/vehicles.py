@@ -51,13 +51,46 @@ FUTURE_SLACK = 10  # samples a vehicle's clock may be ahead beyond that (jitter,
 class Vehicle:
     """One vehicle's loop: assembler, estimator state, alarm, observed delay, where to answer."""
 
-    __slots__ = ("sysid", "model", "state", "alarm", "delay", "assembler", "route", "last_seen", "first_seen",
-                 "processed", "skipped", "warned_missing", "last_command", "last_command_k", "no_report", "rejected",
-                 "last_reject_log", "applied", "commands_effective", "not_applied", "last_sample_at", "run",
-                 "future_since", "taken_over", "held_missing_seen", "held_missing_log")
+    __slots__ = (
+        "sysid",
+        "model",
+        "state",
+        "alarm",
+        "delay",
+        "assembler",
+        "route",
+        "last_seen",
+        "first_seen",
+        "processed",
+        "skipped",
+        "warned_missing",
+        "last_command",
+        "last_command_k",
+        "no_report",
+        "rejected",
+        "last_reject_log",
+        "applied",
+        "commands_effective",
+        "not_applied",
+        "last_sample_at",
+        "run",
+        "future_since",
+        "taken_over",
+        "held_missing_seen",
+        "held_missing_log",
+    )
 
-    def __init__(self, sysid: int, model: VehicleModel, alarm: AlarmConfig, route: object, now: float,
-                 observe: bool, wait_s: float, run: int = 0) -> None:
+    def __init__(
+        self,
+        sysid: int,
+        model: VehicleModel,
+        alarm: AlarmConfig,
+        route: object,
+        now: float,
+        observe: bool,
+        wait_s: float,
+        run: int = 0,
+    ) -> None:
         self.sysid = sysid
         self.run = run  # how many estimators this sysid had before this one (restarts, expiries)
         self.model = model
@@ -102,12 +135,21 @@ class TableCounters:
 class Processed:
     """The outcome of one processed sample, for the reply, the publishers and the recorder."""
 
-    __slots__ = ("vehicle", "sample", "result", "t", "y", "tau_obs", "alarm_event", "f_mag", "command_applied",
-                 "u_abs")
+    __slots__ = ("vehicle", "sample", "result", "t", "y", "tau_obs", "alarm_event", "f_mag", "command_applied", "u_abs")
 
-    def __init__(self, vehicle: Vehicle, sample: AssembledSample, result: StepResult, t: float, y: list[float],
-                 tau_obs: float | None, alarm_event: str | None, f_mag: float,
-                 command_applied: bool | None = None, u_abs: list[float] | None = None) -> None:
+    def __init__(
+        self,
+        vehicle: Vehicle,
+        sample: AssembledSample,
+        result: StepResult,
+        t: float,
+        y: list[float],
+        tau_obs: float | None,
+        alarm_event: str | None,
+        f_mag: float,
+        command_applied: bool | None = None,
+        u_abs: list[float] | None = None,
+    ) -> None:
         self.vehicle = vehicle
         self.sample = sample
         self.result = result
@@ -124,8 +166,15 @@ class Processed:
 class VehicleTable:
     """Routes messages to each vehicle's assembler and samples to its estimator; creates and drops vehicles."""
 
-    def __init__(self, fleet: Fleet, alarm: AlarmConfig, timeout: float = 10.0, restart_silence: float = 1.0,
-                 observe: bool = False, wait_s: float = 0.02) -> None:
+    def __init__(
+        self,
+        fleet: Fleet,
+        alarm: AlarmConfig,
+        timeout: float = 10.0,
+        restart_silence: float = 1.0,
+        observe: bool = False,
+        wait_s: float = 0.02,
+    ) -> None:
         self.fleet = fleet
         self.alarm = alarm
         self.timeout = timeout
@@ -146,19 +195,30 @@ class VehicleTable:
                 self.counters.refused += 1
             if sysid not in self._refused_logged:
                 self._refused_logged.add(sysid)
-                log.warning("refusing vehicle sysid %d from %s: no plant/gains for it (fleet file or --plant/--gains)",
-                            sysid, _where(route))
+                log.warning(
+                    "refusing vehicle sysid %d from %s: no plant/gains for it (fleet file or --plant/--gains)",
+                    sysid,
+                    _where(route),
+                )
             return None
         run = self._runs.get(sysid, -1) + 1
         self._runs[sysid] = run
         vehicle = self.vehicles[sysid] = Vehicle(sysid, model, self.alarm, route, now, self.observe, self.wait_s, run)
         self.counters.vehicles_seen += 1
         op = model.signals.describe_operating_point()
-        log.info("vehicle sysid %d from %s: new estimator (plant %s; %s%s)", sysid, _where(route), model.plant.name,
-                 model.signals.describe(), f"; {op}" if op else "")
+        log.info(
+            "vehicle sysid %d from %s: new estimator (plant %s; %s%s)",
+            sysid,
+            _where(route),
+            model.plant.name,
+            model.signals.describe(),
+            f"; {op}" if op else "",
+        )
         return vehicle
 
-    def message(self, sysid: int, name: str, values: tuple, route: object, now: float) -> list[tuple[Vehicle, AssembledSample]]:
+    def message(
+        self, sysid: int, name: str, values: tuple, route: object, now: float
+    ) -> list[tuple[Vehicle, AssembledSample]]:
         """File one decoded message; returns the samples it completed (oldest first).
 
         Who may speak for a vehicle: the link and peer it is bound to. While that source is live
@@ -177,18 +237,28 @@ class VehicleTable:
         instant = name == asm.signals.instant
         last_k = asm.last_k
         # where the vehicle's clock can be: only worth working out for a stamp beyond the usual slack
-        max_k = (self._max_k(vehicle, now) if last_k is not None and k is not None and k > last_k + FUTURE_SLACK
-                 else None)
+        max_k = (
+            self._max_k(vehicle, now) if last_k is not None and k is not None and k > last_k + FUTURE_SLACK else None
+        )
         new_route = route != vehicle.route
         if new_route and now - vehicle.last_seen < self.restart_silence and _alive(vehicle.route):
             self.counters.foreign_source += 1
             return []
-        if ((new_route or vehicle.taken_over) and k is not None and last_k is not None
-                and (k < last_k or (max_k is not None and k > max_k))):
+        if (
+            (new_route or vehicle.taken_over)
+            and k is not None
+            and last_k is not None
+            and (k < last_k or (max_k is not None and k > max_k))
+        ):
             return self._restart(vehicle, name, values, route, now, "new source", k)
         if new_route:
-            log.info("vehicle sysid %d now speaks from %s (was %s, silent %.1f s)", sysid, _where(route),
-                     _where(vehicle.route), now - vehicle.last_seen)
+            log.info(
+                "vehicle sysid %d now speaks from %s (was %s, silent %.1f s)",
+                sysid,
+                _where(route),
+                _where(vehicle.route),
+                now - vehicle.last_seen,
+            )
             vehicle.route = route
             vehicle.taken_over = True
         if max_k is not None and k is not None and k > max_k and instant:
@@ -210,10 +280,17 @@ class VehicleTable:
         ahead = (now - vehicle.last_sample_at) * MAX_SPEEDUP / vehicle.model.plant.h
         return vehicle.assembler.last_k + FUTURE_SLACK + int(min(ahead, 1e9))
 
-    def _restart(self, vehicle: Vehicle, name: str, values: tuple, route: object, now: float, why: str,
-                 k: int) -> list[tuple[Vehicle, AssembledSample]]:
-        log.info("vehicle sysid %d restarted (%s %s, k %d -> %d): fresh estimator", vehicle.sysid, why,
-                 _where(route), vehicle.assembler.last_k, k)
+    def _restart(
+        self, vehicle: Vehicle, name: str, values: tuple, route: object, now: float, why: str, k: int
+    ) -> list[tuple[Vehicle, AssembledSample]]:
+        log.info(
+            "vehicle sysid %d restarted (%s %s, k %d -> %d): fresh estimator",
+            vehicle.sysid,
+            why,
+            _where(route),
+            vehicle.assembler.last_k,
+            k,
+        )
         self.counters.restarts += 1
         self._retire(vehicle.sysid)
         return self.message(vehicle.sysid, name, values, route, now)
@@ -232,7 +309,9 @@ class VehicleTable:
             out.extend((v, s) for s in v.assembler.flush(now))
         return out
 
-    def process(self, vehicle: Vehicle, sample: AssembledSample, wall: float, now: float | None = None) -> Processed | None:
+    def process(
+        self, vehicle: Vehicle, sample: AssembledSample, wall: float, now: float | None = None
+    ) -> Processed | None:
         """Step the vehicle's estimator on one assembled sample (control or observe-only).
 
         None when the values gate refuses the sample: a non-finite or out-of-envelope input never reaches
@@ -251,8 +330,13 @@ class VehicleTable:
             self.counters.rejected_values += 1
             if vehicle.last_sample_at - vehicle.last_reject_log >= 10.0:
                 vehicle.last_reject_log = vehicle.last_sample_at
-                log.warning("vehicle sysid %d: sample k=%d rejected before the estimator (%s); %d so far",
-                            vehicle.sysid, sample.k, reason, vehicle.rejected)
+                log.warning(
+                    "vehicle sysid %d: sample k=%d rejected before the estimator (%s); %d so far",
+                    vehicle.sysid,
+                    sample.k,
+                    reason,
+                    vehicle.rejected,
+                )
             return None
         for name in [n for n, v in values.items() if not math.isfinite(v)]:
             del values[name]  # a non-finite recorded-only signal is not recorded
@@ -280,8 +364,9 @@ class VehicleTable:
                 u_abs = [lim if v > lim else -lim if v < -lim else v for v in u_abs]
         if result.reset:
             self.counters.resets += 1
-            log.error("vehicle sysid %d: estimator state became non-finite at k=%d; reset to zero", vehicle.sysid,
-                      sample.k)
+            log.error(
+                "vehicle sysid %d: estimator state became non-finite at k=%d; reset to zero", vehicle.sysid, sample.k
+            )
         vehicle.route = sample.route
         vehicle.processed += 1
         self.counters.processed += 1
@@ -298,7 +383,9 @@ class VehicleTable:
         """Did the last command (for k-1, or earlier when samples were lost since) act? The report at k says so."""
         if vehicle.last_command is None or vehicle.last_command_k is None or vehicle.last_command_k >= k:
             return None  # samples lost since the last command do not matter: no command was sent for them
-        applied = all(abs(r - c) <= APPLIED_TOLERANCE * max(1.0, abs(c)) for r, c in zip(reported, vehicle.last_command))
+        applied = all(
+            abs(r - c) <= APPLIED_TOLERANCE * max(1.0, abs(c)) for r, c in zip(reported, vehicle.last_command)
+        )
         vehicle.applied.append(applied)
         if not applied:
             vehicle.not_applied += 1
@@ -306,9 +393,13 @@ class VehicleTable:
         misses = vehicle.applied.count(False)
         if vehicle.commands_effective and misses >= NOT_APPLIED_ENTER:
             vehicle.commands_effective = False
-            log.warning("vehicle sysid %d: its commands are not taking effect (%d of the last %d not applied: late, "
-                        "lost or rejected); the estimator steps with the deflection it reports", vehicle.sysid, misses,
-                        len(vehicle.applied))
+            log.warning(
+                "vehicle sysid %d: its commands are not taking effect (%d of the last %d not applied: late, "
+                "lost or rejected); the estimator steps with the deflection it reports",
+                vehicle.sysid,
+                misses,
+                len(vehicle.applied),
+            )
         elif not vehicle.commands_effective and misses == 0 and len(vehicle.applied) == APPLIED_WINDOW:
             vehicle.commands_effective = True
             log.info("vehicle sysid %d: its commands take effect again", vehicle.sysid)
@@ -339,8 +430,13 @@ class VehicleTable:
             return
         if now - v.held_missing_log >= 10.0:
             v.held_missing_log = now
-            log.warning("vehicle sysid %d: %d sample(s) dropped: %s (no time field) not heard within its hold; "
-                        "%d so far", v.sysid, count - v.held_missing_seen, ", ".join(stale), count)
+            log.warning(
+                "vehicle sysid %d: %d sample(s) dropped: %s (no time field) not heard within its hold; %d so far",
+                v.sysid,
+                count - v.held_missing_seen,
+                ", ".join(stale),
+                count,
+            )
             v.held_missing_seen = count
 
     def expire(self, now: float) -> list[int]:
@@ -364,12 +460,20 @@ class VehicleTable:
             if not missing and asm.expect_actuator:
                 missing = [m for m in asm.signals.actuator_messages() if m not in asm.seen]
             stale = asm.missing_held() if not missing else ()
-            what = (f"missing {', '.join(missing)}" if missing else
-                    f"{', '.join(stale)} (no time field: a latest value) is older than its hold" if stale else
-                    "its messages never share a sampling instant (check the time fields)")
-            log.warning("vehicle sysid %d: telemetry arrives (%s) but never becomes a sample: %s (signal map: %s)",
-                        v.sysid, ", ".join(sorted(asm.seen)) or "nothing the signal map uses", what,
-                        asm.signals.describe())
+            what = (
+                f"missing {', '.join(missing)}"
+                if missing
+                else f"{', '.join(stale)} (no time field: a latest value) is older than its hold"
+                if stale
+                else "its messages never share a sampling instant (check the time fields)"
+            )
+            log.warning(
+                "vehicle sysid %d: telemetry arrives (%s) but never becomes a sample: %s (signal map: %s)",
+                v.sysid,
+                ", ".join(sorted(asm.seen)) or "nothing the signal map uses",
+                what,
+                asm.signals.describe(),
+            )
             v.warned_missing = True
             warned.append(v.sysid)
         return warned

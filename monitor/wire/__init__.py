@@ -9,7 +9,10 @@ Shared by ``monitor`` and ``sim_vehicle`` so that both sides of the wire are one
 # [disturbance] between levels with it. Here, in the package module, so that a command's --help gets the choices
 # without importing numpy.
 TURBULENCE_INTENSITY: dict[str, tuple[float, int] | None] = {
-    "none": None, "light": (25.0, 3), "moderate": (50.0, 4), "severe": (75.0, 6),
+    "none": None,
+    "light": (25.0, 3),
+    "moderate": (50.0, 4),
+    "severe": (75.0, 6),
 }
 # the levels, as every command and plant file names them
 TURBULENCE_LEVELS = tuple(TURBULENCE_INTENSITY)  # ("none", "light", "moderate", "severe")

@@ -51,9 +51,9 @@ from __future__ import annotations
 import itertools
 import math
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
@@ -359,6 +359,7 @@ class Wind:
 
 def parse_wind_spec(text: str, h: float, seed: int = 0) -> Wind:
     """Parse a wind SPEC (module docstring); a typo is a one-line ``UserError`` quoting the SPEC."""
+
     def fail(why: str) -> UserError:
         return UserError(f"bad wind SPEC '{text}': {why} (expected paper, none, turbulence:SIGMA[:TAU], joined by '+')")
 
@@ -442,6 +443,7 @@ def parse_excite_spec(text: str | None) -> Excitation | None:
     except ValueError:
         numbers = []
     if kind != "prbs" or len(numbers) != 2 or not all(math.isfinite(v) and v > 0 for v in numbers):
-        raise UserError(f"bad --excite SPEC '{text}': expected prbs:AMP:SECONDS with AMP (deg) and SECONDS > 0, "
-                        "e.g. prbs:1:60")
+        raise UserError(
+            f"bad --excite SPEC '{text}': expected prbs:AMP:SECONDS with AMP (deg) and SECONDS > 0, e.g. prbs:1:60"
+        )
     return Excitation(amplitude=numbers[0], seconds=numbers[1])

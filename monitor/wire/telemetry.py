@@ -117,9 +117,19 @@ def quantities(sample: Sample) -> dict[str, float]:
     if isinstance(sample, AircraftSample):
         roll, yaw, p, r = sample.attitude
         groundspeed, heading, throttle, altitude, climb = sample.hud
-        values.update(theta=sample.theta_deg, roll=math.degrees(roll), yaw=math.degrees(yaw), p=math.degrees(p),
-                      r=math.degrees(r), airspeed=sample.airspeed_m_s, groundspeed=groundspeed, heading=heading,
-                      throttle=throttle, altitude=altitude, climb=climb)
+        values.update(
+            theta=sample.theta_deg,
+            roll=math.degrees(roll),
+            yaw=math.degrees(yaw),
+            p=math.degrees(p),
+            r=math.degrees(r),
+            airspeed=sample.airspeed_m_s,
+            groundspeed=groundspeed,
+            heading=heading,
+            throttle=throttle,
+            altitude=altitude,
+            climb=climb,
+        )
     return values
 
 
@@ -136,15 +146,20 @@ def _message(name: str, fields: dict[str, float], elements: dict[str, dict[int, 
     """One message of the sample: its defined fields set, its time field at the sample's instant, the rest 0."""
     if name == "ATTITUDE":
         return mavlink.MAVLink_attitude_message(
-            int(t_us // 1000) & 0xFFFFFFFF, *(float(fields.get(f, 0.0)) for f in
-                                              ("roll", "pitch", "yaw", "rollspeed", "pitchspeed", "yawspeed")))
+            int(t_us // 1000) & 0xFFFFFFFF,
+            *(float(fields.get(f, 0.0)) for f in ("roll", "pitch", "yaw", "rollspeed", "pitchspeed", "yawspeed")),
+        )
     if name == "AOA_SSA":
         return mavlink.MAVLink_aoa_ssa_message(t_us, float(fields.get("AOA", 0.0)), 0.0)
     if name == "VFR_HUD":
         return mavlink.MAVLink_vfr_hud_message(
-            float(fields.get("airspeed", 0.0)), float(fields.get("groundspeed", 0.0)),
-            int(round(fields.get("heading", 0.0))) % 360, max(0, min(100, int(fields.get("throttle", 0.0)))),
-            float(fields.get("alt", 0.0)), float(fields.get("climb", 0.0)))
+            float(fields.get("airspeed", 0.0)),
+            float(fields.get("groundspeed", 0.0)),
+            int(round(fields.get("heading", 0.0))) % 360,
+            max(0, min(100, int(fields.get("throttle", 0.0)))),
+            float(fields.get("alt", 0.0)),
+            float(fields.get("climb", 0.0)),
+        )
     if name == "ACTUATOR_OUTPUT_STATUS":
         actuator = [0.0] * 32
         for index, value in elements.get("actuator", {}).items():

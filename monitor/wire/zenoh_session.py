@@ -15,14 +15,22 @@ import logging
 import re
 import socket
 import threading
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 import zenoh
 
 from monitor.errors import UserError
 
-__all__ = ["DEFAULT_PREFIX", "build_config", "open_session", "close_quietly", "add_zenoh_arguments", "config_from_args", "key"]
+__all__ = [
+    "DEFAULT_PREFIX",
+    "build_config",
+    "open_session",
+    "close_quietly",
+    "add_zenoh_arguments",
+    "config_from_args",
+    "key",
+]
 
 DEFAULT_PREFIX = "uav"
 log = logging.getLogger(__name__)
@@ -144,15 +152,37 @@ def close_quietly(session: zenoh.Session | None, *entities, timeout: float = 5.0
 def add_zenoh_arguments(parser, prefix_default: str = DEFAULT_PREFIX) -> None:
     """The Zenoh flags every command shares (one definition, not copies)."""
     group = parser.add_argument_group("Zenoh")
-    group.add_argument("--zenoh-listen", action="append", default=[], metavar="EP",
-                       help="endpoint to listen on, e.g. tcp/127.0.0.1:7447 (repeatable; none given: an ephemeral loopback port)")
-    group.add_argument("--zenoh-connect", action="append", default=[], metavar="EP",
-                       help="endpoint of a peer or router to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
-    group.add_argument("--zenoh-config", metavar="FILE", help="a Zenoh JSON5 config file (replaces the loopback, no-scouting settings above)")
-    group.add_argument("--zenoh-mode", choices=("peer", "client", "router"), default="peer",
-                       help="Zenoh session mode (default: %(default)s)")
-    group.add_argument("--key-prefix", default=prefix_default, metavar="PREFIX",
-                       help="key prefix, e.g. uav/<network> to keep overlapping system ids apart (default: %(default)s)")
+    group.add_argument(
+        "--zenoh-listen",
+        action="append",
+        default=[],
+        metavar="EP",
+        help="endpoint to listen on, e.g. tcp/127.0.0.1:7447 (repeatable; none given: an ephemeral loopback port)",
+    )
+    group.add_argument(
+        "--zenoh-connect",
+        action="append",
+        default=[],
+        metavar="EP",
+        help="endpoint of a peer or router to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)",
+    )
+    group.add_argument(
+        "--zenoh-config",
+        metavar="FILE",
+        help="a Zenoh JSON5 config file (replaces the loopback, no-scouting settings above)",
+    )
+    group.add_argument(
+        "--zenoh-mode",
+        choices=("peer", "client", "router"),
+        default="peer",
+        help="Zenoh session mode (default: %(default)s)",
+    )
+    group.add_argument(
+        "--key-prefix",
+        default=prefix_default,
+        metavar="PREFIX",
+        help="key prefix, e.g. uav/<network> to keep overlapping system ids apart (default: %(default)s)",
+    )
 
 
 def config_from_args(args) -> zenoh.Config:

@@ -44,24 +44,66 @@ def design_and_fly(tmp_path: Path, plant: str, steps: int, *vehicle_args: str) -
     from monitor.api import read_recording
 
     gains = tmp_path / "gains.toml"
-    done = subprocess.run([sys.executable, "-m", "monitor", "design", "--plant", plant, "--out", str(gains)],
-                          capture_output=True, text=True, timeout=240)
+    done = subprocess.run(
+        [sys.executable, "-m", "monitor", "design", "--plant", plant, "--out", str(gains)],
+        capture_output=True,
+        text=True,
+        timeout=240,
+    )
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     port, rrd, truth = free_udp_port(), tmp_path / "run.rrd", tmp_path / "truth.jsonl"
-    monitor = Daemon("monitor", ["run", "--plant", plant, "--gains", str(gains), "--mavlink", f"udpin:127.0.0.1:{port}",
-                                 "--zenoh-listen", f"tcp/127.0.0.1:{free_tcp_port()}", "--rrd", str(rrd)],
-                     tmp_path / "monitor.log")
+    monitor = Daemon(
+        "monitor",
+        [
+            "run",
+            "--plant",
+            plant,
+            "--gains",
+            str(gains),
+            "--mavlink",
+            f"udpin:127.0.0.1:{port}",
+            "--zenoh-listen",
+            f"tcp/127.0.0.1:{free_tcp_port()}",
+            "--rrd",
+            str(rrd),
+        ],
+        tmp_path / "monitor.log",
+    )
     with monitor:
         wait_ready(monitor)
-        vehicle = Daemon("sim_vehicle", ["run", "--aircraft", "c172p", "--airspeed", "100", "--altitude", "3000",
-                                         "--rate", str(RATE), "--steps", str(steps), "--speedup", "3", "--mavlink",
-                                         f"udpout:127.0.0.1:{port}", "--no-zenoh", "--truth-jsonl", str(truth),
-                                         *vehicle_args], tmp_path / "vehicle.log")
+        vehicle = Daemon(
+            "sim_vehicle",
+            [
+                "run",
+                "--aircraft",
+                "c172p",
+                "--airspeed",
+                "100",
+                "--altitude",
+                "3000",
+                "--rate",
+                str(RATE),
+                "--steps",
+                str(steps),
+                "--speedup",
+                "3",
+                "--mavlink",
+                f"udpout:127.0.0.1:{port}",
+                "--no-zenoh",
+                "--truth-jsonl",
+                str(truth),
+                *vehicle_args,
+            ],
+            tmp_path / "vehicle.log",
+        )
         with vehicle:
             assert vehicle.wait(120) == 0, vehicle.log()[-3000:]
         monitor.signal()
         assert monitor.wait(30) == 0, monitor.log()[-3000:]
     samples = read_recording(rrd).vehicles[1].samples
-    return Flight(design_out=done.stdout, monitor_log=monitor.log(),
-                  truth=[json.loads(line) for line in truth.read_text().splitlines()],
-                  f_hat={r.k: float(np.ravel(r.f_hat)[0]) for r in samples})
+    return Flight(
+        design_out=done.stdout,
+        monitor_log=monitor.log(),
+        truth=[json.loads(line) for line in truth.read_text().splitlines()],
+        f_hat={r.k: float(np.ravel(r.f_hat)[0]) for r in samples},
+    )

@@ -30,12 +30,22 @@ class MavProxy(Daemon):
         super().__init__("x", [], tmp_path / "mavproxy.log")
         self.tlog = tmp_path / "mavproxy.tlog"
         self.master = master
-        self.cmd = [sys.executable, _mavproxy_script(), f"--master=udpin:127.0.0.1:{master}",
-                    f"--out={out_kind}:127.0.0.1:{out}", "--daemon", "--mav20", "--dialect=ardupilotmega",
-                    f"--state-basedir={tmp_path}", f"--logfile={self.tlog}", "--default-modules=", "--nowait",
-                    "--cmd=set flushlogs True"]  # else the tlog tail sits in a buffer a signal may never write
+        self.cmd = [
+            sys.executable,
+            _mavproxy_script(),
+            f"--master=udpin:127.0.0.1:{master}",
+            f"--out={out_kind}:127.0.0.1:{out}",
+            "--daemon",
+            "--mav20",
+            "--dialect=ardupilotmega",
+            f"--state-basedir={tmp_path}",
+            f"--logfile={self.tlog}",
+            "--default-modules=",
+            "--nowait",
+            "--cmd=set flushlogs True",
+        ]  # else the tlog tail sits in a buffer a signal may never write
 
-    def __enter__(self) -> "MavProxy":
+    def __enter__(self) -> MavProxy:
         super().__enter__()
         wait_for(lambda: udp_port_taken(self.master) or self.proc.poll() is not None, 30, what="MAVProxy listening")
         assert self.proc.poll() is None, self.log()

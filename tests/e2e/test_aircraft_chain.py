@@ -32,23 +32,47 @@ BIAS = 2.0
 
 def _cli(module: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
     out = subprocess.run([sys.executable, "-m", module, *args], capture_output=True, text=True, timeout=timeout)
-    assert out.returncode == 0, f"{module} {args[0]} failed ({out.returncode}):\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}"
+    assert out.returncode == 0, (
+        f"{module} {args[0]} failed ({out.returncode}):\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}"
+    )
     return out
 
 
 def _fly(d: Path, master: int, sysid: int, steps: int, *vehicle_args: str) -> None:
     """Fly ``steps`` samples of c172p as ``sysid`` into MAVProxy's master port and wait for the vehicle to finish."""
-    vehicle = Daemon("sim_vehicle", ["run", "--aircraft", "c172p", "--airspeed", "100", "--altitude", "3000",
-                                     "--rate", str(RATE), "--sysid", str(sysid), "--steps", str(steps), "--mavlink",
-                                     f"udpout:127.0.0.1:{master}", "--no-zenoh", *vehicle_args],
-                     d / f"vehicle{sysid}.log")
+    vehicle = Daemon(
+        "sim_vehicle",
+        [
+            "run",
+            "--aircraft",
+            "c172p",
+            "--airspeed",
+            "100",
+            "--altitude",
+            "3000",
+            "--rate",
+            str(RATE),
+            "--sysid",
+            str(sysid),
+            "--steps",
+            str(steps),
+            "--mavlink",
+            f"udpout:127.0.0.1:{master}",
+            "--no-zenoh",
+            *vehicle_args,
+        ],
+        d / f"vehicle{sysid}.log",
+    )
     with vehicle:
         assert vehicle.wait(120) == 0, vehicle.log()[-3000:]
 
 
 def _logged(tlog: Path, sysid: int, steps: int) -> None:
-    wait_for(lambda: tlog.exists() and tlog_counts(tlog)[("AOA_SSA", sysid)] >= steps - 1, 15,
-             what=f"MAVProxy's tlog to hold vehicle {sysid}'s flight")
+    wait_for(
+        lambda: tlog.exists() and tlog_counts(tlog)[("AOA_SSA", sysid)] >= steps - 1,
+        15,
+        what=f"MAVProxy's tlog to hold vehicle {sysid}'s flight",
+    )
 
 
 def _f_hat_by_k(rows) -> dict[int, float]:
@@ -63,7 +87,8 @@ def _assert_tracks_the_bias(f_hat: dict[int, float], truth_f: dict[int, float], 
     worst = int(np.argmax(np.abs(errors)))
     assert np.max(np.abs(errors)) <= 0.05 * BIAS, (
         f"{what}: |f_hat - f| up to {np.max(np.abs(errors)):.3f} deg at k = {judged[worst]} "
-        f"(RMS {np.sqrt(np.mean(errors ** 2)):.3f})")
+        f"(RMS {np.sqrt(np.mean(errors**2)):.3f})"
+    )
 
 
 def test_excite_identify_design_and_close_the_loop_on_jsbsim(tmp_path: Path) -> None:
@@ -90,15 +115,40 @@ def test_excite_identify_design_and_close_the_loop_on_jsbsim(tmp_path: Path) -> 
         # 3. the closed loop on the nonlinear aircraft with a 2 deg bias, through the README's MAVProxy
         rrd = tmp_path / "closed.rrd"
         truth = tmp_path / "truth.jsonl"
-        monitor = Daemon("monitor", ["run", "--plant", str(plant), "--gains", str(gains), "--mavlink",
-                                     f"udpin:127.0.0.1:{s.port(14550)}", "--zenoh-listen",
-                                     f"tcp/127.0.0.1:{free_tcp_port()}", "--rrd", str(rrd), "--name", "aircraft"],
-                         tmp_path / "monitor.log")
+        monitor = Daemon(
+            "monitor",
+            [
+                "run",
+                "--plant",
+                str(plant),
+                "--gains",
+                str(gains),
+                "--mavlink",
+                f"udpin:127.0.0.1:{s.port(14550)}",
+                "--zenoh-listen",
+                f"tcp/127.0.0.1:{free_tcp_port()}",
+                "--rrd",
+                str(rrd),
+                "--name",
+                "aircraft",
+            ],
+            tmp_path / "monitor.log",
+        )
         with monitor:
             wait_ready(monitor)
             assert "operating point" in monitor.log(), monitor.log()[-2000:]
-            _fly(tmp_path, s.port(14551), 2, FLIGHT_STEPS, "--fault", f"bias:{BIAS:g}@{ONSET}", "--speedup", "3",
-                 "--truth-jsonl", str(truth))
+            _fly(
+                tmp_path,
+                s.port(14551),
+                2,
+                FLIGHT_STEPS,
+                "--fault",
+                f"bias:{BIAS:g}@{ONSET}",
+                "--speedup",
+                "3",
+                "--truth-jsonl",
+                str(truth),
+            )
             _logged(tlog, 2, FLIGHT_STEPS)
             monitor.signal()  # SIGTERM: the summary line and a complete recording
             assert monitor.wait(30) == 0, monitor.log()[-3000:]
@@ -110,7 +160,18 @@ def test_excite_identify_design_and_close_the_loop_on_jsbsim(tmp_path: Path) -> 
 
     # 4. observe-only on the same flight: analyse reads MAVProxy's tlog of it
     analysed = tmp_path / "analysed.rrd"
-    _cli("monitor", "analyse", str(tlog), "--sysid", "2", "--plant", str(plant), "--gains", str(gains),
-         "--rrd", str(analysed))
+    _cli(
+        "monitor",
+        "analyse",
+        str(tlog),
+        "--sysid",
+        "2",
+        "--plant",
+        str(plant),
+        "--gains",
+        str(gains),
+        "--rrd",
+        str(analysed),
+    )
     offline = read_recording(analysed).vehicles[2].samples
     _assert_tracks_the_bias(_f_hat_by_k(offline), truth_f, "observe-only over the tlog")

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import subprocess
 import sys
 import time
-import socket
 from pathlib import Path
 
 import numpy as np
@@ -65,12 +65,20 @@ class AircraftPeer(PeerVehicle):
         else:
             reported = self.u_applied
         y_wire = [f32(alpha) - OP["alpha"], f32(q / DEG) * DEG - OP["q"], f32(theta / DEG) * DEG - OP["theta"]]
-        msgs = [("ATTITUDE", mavlink.MAVLink_attitude_message((t_us // 1000) & 0xFFFFFFFF, 0.01, theta / DEG, 1.5,
-                                                               0.0, q / DEG, 0.0)),
-                ("AOA_SSA", mavlink.MAVLink_aoa_ssa_message(t_us, alpha, 0.0)),
-                ("VFR_HUD", mavlink.MAVLink_vfr_hud_message(v, v, 86, 62, 914.4, 0.0)),
-                ("ACTUATOR_OUTPUT_STATUS", mavlink.MAVLink_actuator_output_status_message(t_us, 1,
-                                                                                          [reported] + [0.0] * 31))]
+        msgs = [
+            (
+                "ATTITUDE",
+                mavlink.MAVLink_attitude_message(
+                    (t_us // 1000) & 0xFFFFFFFF, 0.01, theta / DEG, 1.5, 0.0, q / DEG, 0.0
+                ),
+            ),
+            ("AOA_SSA", mavlink.MAVLink_aoa_ssa_message(t_us, alpha, 0.0)),
+            ("VFR_HUD", mavlink.MAVLink_vfr_hud_message(v, v, 86, 62, 914.4, 0.0)),
+            (
+                "ACTUATOR_OUTPUT_STATUS",
+                mavlink.MAVLink_actuator_output_status_message(t_us, 1, [reported] + [0.0] * 31),
+            ),
+        ]
         self.rng.shuffle(msgs)
         if self.rng.random() < 0.2:
             msgs.append(msgs[0])  # a repeated message: counted, never processed twice
@@ -83,8 +91,12 @@ class AircraftPeer(PeerVehicle):
             else:
                 sent.add(name)
                 self.expect_report |= name == "ACTUATOR_OUTPUT_STATUS"
-            if k not in self.used and {"ATTITUDE", "AOA_SSA"} <= sent and self.held is not None and (
-                    not self.expect_report or "ACTUATOR_OUTPUT_STATUS" in sent):
+            if (
+                k not in self.used
+                and {"ATTITUDE", "AOA_SSA"} <= sent
+                and self.held is not None
+                and (not self.expect_report or "ACTUATOR_OUTPUT_STATUS" in sent)
+            ):
                 report = f32(reported) if "ACTUATOR_OUTPUT_STATUS" in sent else U0  # k = 0: its own u(-1) = 0
                 self.used[k] = ([*y_wire, self.held - OP["airspeed"]], report - U0)
         out = []
@@ -105,8 +117,9 @@ class AircraftPeer(PeerVehicle):
         self.u_applied = f32(u_abs)
 
 
-def recompute(plant, gains: dict[str, np.ndarray], peer: AircraftPeer, ks: list[int], observe: bool = False,
-              tol: float = 1e-5) -> int:
+def recompute(
+    plant, gains: dict[str, np.ndarray], peer: AircraftPeer, ks: list[int], observe: bool = False, tol: float = 1e-5
+) -> int:
     """Eqs. (5)-(6) in deviation coordinates from what crossed the wire; commands must be u0 + u.
 
     1e-5 (relative, at least 1e-5 absolute): float32 on the wire leaves ~4e-7; using the other sample's VFR_HUD
@@ -125,8 +138,11 @@ def recompute(plant, gains: dict[str, np.ndarray], peer: AircraftPeer, ks: list[
             u = np.clip(gains["K1"] @ y + gains["K2"] @ u_prev + gains["K3"] @ f, -LIMIT - U0, LIMIT - U0)
         assert abs(peer.wire.fhat[k] - f[0]) <= tol * max(1.0, abs(f[0])), (k, peer.wire.fhat[k], f[0])
         if not observe:
-            assert abs(peer.wire.commands[k] - (U0 + u[0])) <= tol * max(1.0, abs(U0 + u[0])), \
-                (k, peer.wire.commands[k], U0 + u[0])
+            assert abs(peer.wire.commands[k] - (U0 + u[0])) <= tol * max(1.0, abs(U0 + u[0])), (
+                k,
+                peer.wire.commands[k],
+                U0 + u[0],
+            )
             compared += 1
         r = y - C @ x
         x, f = A @ x + B0 @ u + B1 @ u_prev + Df @ f + gains["L"] @ r, f + gains["M"] @ r
@@ -136,8 +152,20 @@ def recompute(plant, gains: dict[str, np.ndarray], peer: AircraftPeer, ks: list[
 
 
 def _monitor(tmp_path: Path, plant: Path, gains: Path, port: int, zenoh: str, name: str, *extra: str) -> Daemon:
-    args = ["run", "--plant", str(plant), "--gains", str(gains), "--mavlink", f"udpin:127.0.0.1:{port}",
-            "--name", name, "--zenoh-listen", zenoh, *extra]
+    args = [
+        "run",
+        "--plant",
+        str(plant),
+        "--gains",
+        str(gains),
+        "--mavlink",
+        f"udpin:127.0.0.1:{port}",
+        "--name",
+        name,
+        "--zenoh-listen",
+        zenoh,
+        *extra,
+    ]
     return Daemon("monitor", args, tmp_path / f"{name}.log")
 
 
@@ -146,15 +174,24 @@ def _status(endpoint: str) -> list[dict]:
 
     session = open_session(build_config(connect=[endpoint], mode="client"))
     try:
-        return [json.loads(r.ok.payload.to_bytes()) for r in session.get("uav/*/fault/status", timeout=3.0)
-                if r.ok is not None]
+        return [
+            json.loads(r.ok.payload.to_bytes())
+            for r in session.get("uav/*/fault/status", timeout=3.0)
+            if r.ok is not None
+        ]
     finally:
         close_quietly(session)
 
 
 def _cli(*args: str, timeout: float = 60) -> str:
-    done = subprocess.run([sys.executable, "-m", "monitor", *args], capture_output=True, text=True, timeout=timeout,
-                          cwd=REPO, env={**os.environ, "RERUN_ANALYTICS": "0"})
+    done = subprocess.run(
+        [sys.executable, "-m", "monitor", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=REPO,
+        env={**os.environ, "RERUN_ANALYTICS": "0"},
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     return done.stdout
 
@@ -210,7 +247,7 @@ def _fly_observe(peer: AircraftPeer, port: int, steps: int, wait_s: float = 1.0)
             while time.monotonic() < deadline and k not in peer.wire.fhat:
                 try:
                     peer.receive(sock.recv(65535))
-                except socket.timeout:
+                except TimeoutError:
                     continue
             peer.advance(k)
 
@@ -226,8 +263,10 @@ def test_observe_only_about_an_operating_point_and_analyse_of_the_log(tmp_path: 
         return -0.02 * y[1] + (1.0 if 5 <= k < 10 else -1.0 if 10 <= k < 15 else 0.0)
 
     port, zenoh = free_udp_port(), f"tcp/127.0.0.1:{free_tcp_port()}"
-    with TlogWriter(tlog_path) as tlog, \
-            _monitor(tmp_path, plant_path, gains_path, port, zenoh, "observer", "--observe") as monitor:
+    with (
+        TlogWriter(tlog_path) as tlog,
+        _monitor(tmp_path, plant_path, gains_path, port, zenoh, "observer", "--observe") as monitor,
+    ):
         peer = AircraftPeer(plant, sysid=22, seed=8, autopilot=autopilot, tlog=tlog)
         wait_ready(monitor)
         _fly_observe(peer, port, STEPS)
@@ -242,8 +281,21 @@ def test_observe_only_about_an_operating_point_and_analyse_of_the_log(tmp_path: 
     assert settled is not None and settled - ONSET <= 6, settled
 
     rrd = tmp_path / "offline.rrd"
-    report = json.loads(_cli("analyse", str(tlog_path), "--plant", str(plant_path), "--gains", str(gains_path),
-                             "--json", "--rrd", str(rrd), "--fault", f"bias:{BIAS}@{K0 + ONSET}"))
+    report = json.loads(
+        _cli(
+            "analyse",
+            str(tlog_path),
+            "--plant",
+            str(plant_path),
+            "--gains",
+            str(gains_path),
+            "--json",
+            "--rrd",
+            str(rrd),
+            "--fault",
+            f"bias:{BIAS}@{K0 + ONSET}",
+        )
+    )
     assert report["log"]["processed"] == STEPS and report["vehicles"]["22"]["settling_steps"] <= 6
     from monitor.service.recording_reader import load_recording
 

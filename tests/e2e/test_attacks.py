@@ -53,7 +53,7 @@ class Relay:
                 data, self.vehicle = self.down.recvfrom(65535)
                 self.captured.append(data)
                 self.up.sendto(self.tamper(data) if self.tamper else data, self.monitor)
-            except socket.timeout:
+            except TimeoutError:
                 pass
             try:
                 while True:
@@ -63,7 +63,7 @@ class Relay:
             except BlockingIOError:
                 pass
 
-    def __enter__(self) -> "Relay":
+    def __enter__(self) -> Relay:
         self.thread.start()
         return self
 
@@ -129,8 +129,18 @@ def test_nan_spoofing_far_future_and_flood(tmp_path: Path, gains_file: Path) -> 
             attacker = threading.Thread(target=attack, daemon=True)
             with Relay(port, _nan_at(NAN_AT, new_codec(1, 1))) as relay:
                 try:
-                    with sim_daemon(tmp_path, relay.port, bus, 1, "--fault", f"bias:2@{ONSET}", "--summary-json",
-                                    str(vehicle_json), steps=STEPS, speedup=SPEEDUP) as sim:
+                    with sim_daemon(
+                        tmp_path,
+                        relay.port,
+                        bus,
+                        1,
+                        "--fault",
+                        f"bias:2@{ONSET}",
+                        "--summary-json",
+                        str(vehicle_json),
+                        steps=STEPS,
+                        speedup=SPEEDUP,
+                    ) as sim:
                         # the attack starts once the vehicle flies: on an unsigned link whoever speaks first for
                         # a system id is believed (README, threat model); signing is the remedy for that
                         wait_for(lambda: len(estimates) >= 2, 20, what="the vehicle's first estimates")
@@ -151,8 +161,13 @@ def test_nan_spoofing_far_future_and_flood(tmp_path: Path, gains_file: Path) -> 
     # certified interval (0.66 s measured vs tau_max 0.4612 s), and f_hat then wanders by up to ~0.15 deg;
     # what this test guards is that the attacks themselves (NaN, spoofing, far future, junk) do not move it
     settled = settling_k(estimates, 2.0, 0.2)
-    trace = [(e["k"], round(e["f_hat"][0], 3), e.get("command_applied"), e.get("tau")) for e in sorted(estimates, key=lambda e: e["k"])]
-    assert settled is not None and settled - ONSET <= 8, f"settled at {settled}: {trace[ONSET - 2:ONSET + 14]}; true tau max {max((t['tau'] or 0) for t in truth):.3f} s over {len(truth)}"
+    trace = [
+        (e["k"], round(e["f_hat"][0], 3), e.get("command_applied"), e.get("tau"))
+        for e in sorted(estimates, key=lambda e: e["k"])
+    ]
+    assert settled is not None and settled - ONSET <= 8, (
+        f"settled at {settled}: {trace[ONSET - 2 : ONSET + 14]}; true tau max {max((t['tau'] or 0) for t in truth):.3f} s over {len(truth)}"
+    )
     assert _summary(log, "rejected values") == 1 and _summary(log, "future") == 1
     assert _summary(log, "foreign source") > 0 and _summary(log, "garbage") > 0
     assert sent["spoof"] > 50 and sent["flood"] > 500
@@ -164,8 +179,18 @@ def test_all_late_commands_are_noticed_and_the_estimate_stays_bounded(tmp_path: 
         estimates = bus.collect("uav/*/fault/estimate")
         with monitor_daemon(tmp_path, gains_file, port, bus, "late") as monitor:
             wait_ready(monitor)
-            with sim_daemon(tmp_path, port, bus, 1, "--fault", f"bias:2@{ONSET}", "--delay", "const:1.2",
-                            steps=STEPS, speedup=SPEEDUP) as sim:
+            with sim_daemon(
+                tmp_path,
+                port,
+                bus,
+                1,
+                "--fault",
+                f"bias:2@{ONSET}",
+                "--delay",
+                "const:1.2",
+                steps=STEPS,
+                speedup=SPEEDUP,
+            ) as sim:
                 assert sim.wait(60) == 0, sim.log()
             wait_for(lambda: len(estimates) >= STEPS, 30, what="estimates")
             assert monitor.stop() == 0
@@ -188,8 +213,9 @@ def test_signed_frames_replayed_from_a_new_port_publish_nothing(tmp_path: Path, 
         with monitor_daemon(tmp_path, gains_file, port, bus, "signed", "--signing-key", str(key)) as monitor:
             wait_ready(monitor)
             with Relay(port) as relay:
-                with sim_daemon(tmp_path, relay.port, bus, 1, "--signing-key", str(key), steps=30,
-                                speedup=SPEEDUP) as sim:
+                with sim_daemon(
+                    tmp_path, relay.port, bus, 1, "--signing-key", str(key), steps=30, speedup=SPEEDUP
+                ) as sim:
                     assert sim.wait(60) == 0, sim.log()
                 captured = list(relay.captured)
             wait_for(lambda: len(estimates) >= 30, 30, what="signed estimates")

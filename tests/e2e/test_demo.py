@@ -14,8 +14,13 @@ from monitor.service.recording_reader import load_recording
 
 
 def demo(out, *args: str, timeout: float = 150) -> dict:
-    proc = subprocess.run([sys.executable, "-m", "monitor", "demo", "--out", str(out), *args],
-                          capture_output=True, text=True, timeout=timeout, env={**os.environ, "RERUN_ANALYTICS": "0"})
+    proc = subprocess.run(
+        [sys.executable, "-m", "monitor", "demo", "--out", str(out), *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, "RERUN_ANALYTICS": "0"},
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert ("FE settling" in proc.stdout) or ("Monte-Carlo over" in proc.stdout)
     return json.loads((out / ("montecarlo.json" if "--runs" in args else "summary.json")).read_text())
@@ -64,9 +69,17 @@ def test_monte_carlo_mode_depends_on_the_seed_and_keeps_the_live_summary(out):
 
 
 def test_bad_options_are_one_line(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "monitor", "demo", "--out", str(tmp_path), "--methods", "magic"],
-                          capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "monitor", "demo", "--out", str(tmp_path), "--methods", "magic"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.returncode == 2 and "magic" in proc.stderr and "Traceback" not in proc.stderr
-    proc = subprocess.run([sys.executable, "-m", "monitor", "demo", "--out", str(tmp_path), "--fault", "bias:x@y"],
-                          capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "monitor", "demo", "--out", str(tmp_path), "--fault", "bias:x@y"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.returncode == 2 and "bias:x@y" in proc.stderr and "Traceback" not in proc.stderr

@@ -26,8 +26,13 @@ BIAS = 2.0
 
 
 def _demo(out: Path, *args: str, timeout: float = 240) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "monitor", "demo", "--aircraft", "c172p", "--out", str(out), *args],
-                          capture_output=True, text=True, timeout=timeout, env={**os.environ, "RERUN_ANALYTICS": "0"})
+    return subprocess.run(
+        [sys.executable, "-m", "monitor", "demo", "--aircraft", "c172p", "--out", str(out), *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, "RERUN_ANALYTICS": "0"},
+    )
 
 
 def test_aircraft_demo_identifies_designs_and_flies_the_fault_live(tmp_path: Path) -> None:
@@ -64,8 +69,11 @@ def test_aircraft_demo_identifies_designs_and_flies_the_fault_live(tmp_path: Pat
 
 
 def test_aircraft_demo_refuses_what_does_not_apply_in_one_line(tmp_path: Path) -> None:
-    for args, words in ((("--runs", "3"), "--runs does not apply"), (("--models", "lateral"), "--models"),
-                        (("--excite", "sine:1"), "--excite")):
+    for args, words in (
+        (("--runs", "3"), "--runs does not apply"),
+        (("--models", "lateral"), "--models"),
+        (("--excite", "sine:1"), "--excite"),
+    ):
         proc = _demo(tmp_path / "x", *args, timeout=60)
         assert proc.returncode == 2 and words in proc.stderr, (args, proc.stderr)
         assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1, proc.stderr

@@ -27,8 +27,13 @@ def test_identify_writes_a_plant_the_chain_takes_as_it_is(tmp_path) -> None:
     assert "Traceback" not in proc.stderr
     plant = load_plant(plant_file)
     assert plant.n == 4 and tomllib.loads(plant_file.read_text())["identification"]["model"] == "longitudinal"
-    assert plant.signals is not None and set(plant.signals["operating_point"]) == {"alpha", "q", "theta", "airspeed",
-                                                                                  "elevator"}
+    assert plant.signals is not None and set(plant.signals["operating_point"]) == {
+        "alpha",
+        "q",
+        "theta",
+        "airspeed",
+        "elevator",
+    }
 
 
 def test_identify_refusals_are_one_line_and_exit_2(tmp_path) -> None:

@@ -9,22 +9,40 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.model.closed_loop import Gains
 from monitor.design.result import DesignResult
 from monitor.gains import write_gains
+from monitor.model.closed_loop import Gains
 from monitor.model.plant import load_plant, parse_plant
 from monitor.wire.mavlink import mavlink, new_codec
 from tests.daemons import REPO, Daemon, free_tcp_port, free_udp_port
-from tests.e2e.wire_peer import (PeerVehicle, check_against_equations, fly_tcp_client, fly_tcp_server, fly_udp,
-                                 read_gains)
+from tests.e2e.wire_peer import (
+    PeerVehicle,
+    check_against_equations,
+    fly_tcp_client,
+    fly_tcp_server,
+    fly_udp,
+    read_gains,
+)
 from tests.monitor_bus import processed_count, wait_ready
 
 STEPS = 60
 
 
 def _monitor(tmp_path: Path, plant: str, gains: Path, conn: str, name: str, *extra: str) -> Daemon:
-    args = ["run", "--plant", plant, "--gains", str(gains), "--mavlink", conn, "--name", name,
-            "--zenoh-listen", f"tcp/127.0.0.1:{free_tcp_port()}", *extra]
+    args = [
+        "run",
+        "--plant",
+        plant,
+        "--gains",
+        str(gains),
+        "--mavlink",
+        conn,
+        "--name",
+        name,
+        "--zenoh-listen",
+        f"tcp/127.0.0.1:{free_tcp_port()}",
+        *extra,
+    ]
     return Daemon("monitor", args, tmp_path / f"{name}.log")
 
 
@@ -79,8 +97,10 @@ def test_tcpin_accepts_a_vehicle_that_connects(tmp_path: Path, gains_file: Path)
 def test_a_vehicle_that_never_sends_aoa_ssa_gets_one_warning_naming_it(tmp_path: Path, gains_file: Path) -> None:
     port = free_udp_port()
     codec = new_codec(12, 1)
-    with _monitor(tmp_path, "paper-continuous", gains_file, f"udpin:127.0.0.1:{port}", "noaoa") as monitor, \
-            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+    with (
+        _monitor(tmp_path, "paper-continuous", gains_file, f"udpin:127.0.0.1:{port}", "noaoa") as monitor,
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock,
+    ):
         wait_ready(monitor)
         start = time.monotonic()
         k = 0
@@ -105,11 +125,21 @@ def test_a_second_airframe_whose_C_reads_alpha_and_q(tmp_path: Path) -> None:
     plant_file.write_text(SECOND_AIRFRAME)
     plant = parse_plant(SECOND_AIRFRAME, str(plant_file))
     # with C = I, L = A makes the state error deadbeat and M = pinv(Df)/2 a stable fault update
-    gains = Gains(L=plant.A.copy(), M=0.5 * np.linalg.pinv(plant.Df), K1=np.array([[-0.05, 0.0]]),
-                  K2=np.zeros((1, 1)), K3=np.array([[-0.5]]))
+    gains = Gains(
+        L=plant.A.copy(),
+        M=0.5 * np.linalg.pinv(plant.Df),
+        K1=np.array([[-0.05, 0.0]]),
+        K2=np.zeros((1, 1)),
+        K3=np.array([[-0.5]]),
+    )
     gains_path = tmp_path / "gains.toml"
-    write_gains(gains_path, DesignResult(method="hand", gains=gains, gamma_e=0.0, gamma_z=0.0,
-                                         build_seconds=0, solve_seconds=0, total_seconds=0), plant)
+    write_gains(
+        gains_path,
+        DesignResult(
+            method="hand", gains=gains, gamma_e=0.0, gamma_z=0.0, build_seconds=0, solve_seconds=0, total_seconds=0
+        ),
+        plant,
+    )
     peer = PeerVehicle(plant, sysid=5, seed=3, outputs="alpha+q")
     port = free_udp_port()
     with _monitor(tmp_path, str(plant_file), gains_path, f"udpin:127.0.0.1:{port}", "second") as monitor:
@@ -130,8 +160,15 @@ def test_two_links_at_once_and_a_tcp_reconnect(tmp_path: Path, gains_file: Path)
         server.bind(("127.0.0.1", 0))
         server.listen(1)
         tcp_port = server.getsockname()[1]
-        with _monitor(tmp_path, "paper-continuous", gains_file, f"udpin:127.0.0.1:{udp_port}", "two",
-                      "--mavlink", f"tcp:127.0.0.1:{tcp_port}") as monitor:
+        with _monitor(
+            tmp_path,
+            "paper-continuous",
+            gains_file,
+            f"udpin:127.0.0.1:{udp_port}",
+            "two",
+            "--mavlink",
+            f"tcp:127.0.0.1:{tcp_port}",
+        ) as monitor:
             wait_ready(monitor)
             fly_udp(udp_peer, udp_port, 25)
             fly_tcp_server(tcp_peer, server, 10)  # the server then drops the connection ...

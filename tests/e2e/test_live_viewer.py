@@ -20,8 +20,9 @@ from tests.rerun_viewer import headless_viewer, load_when_complete
 
 
 def test_the_viewer_and_the_file_get_every_sample(tmp_path: Path, gains_file: Path) -> None:
-    from monitor.service.recording_reader import load_recording
     from rerun.chunk import RrdReader
+
+    from monitor.service.recording_reader import load_recording
 
     port, vport = free_udp_port(), free_tcp_port()
     url = f"rerun+http://127.0.0.1:{vport}/proxy"
@@ -53,8 +54,9 @@ def test_the_viewer_and_the_file_get_every_sample(tmp_path: Path, gains_file: Pa
     assert RrdReader(seen).blueprints(), "the viewer got no blueprint"
 
 
-def test_a_viewer_that_dies_or_never_answers_costs_neither_the_loop_nor_the_file(tmp_path: Path,
-                                                                                  gains_file: Path) -> None:
+def test_a_viewer_that_dies_or_never_answers_costs_neither_the_loop_nor_the_file(
+    tmp_path: Path, gains_file: Path
+) -> None:
     """One viewer killed (SIGKILL) mid-run, one address where nothing listens: the vehicle still gets every
     command, the file every sample, the monitor exits 0 promptly (``wait(10)``) with one WARNING per viewer."""
     port, vport = free_udp_port(), free_tcp_port()
@@ -62,13 +64,15 @@ def test_a_viewer_that_dies_or_never_answers_costs_neither_the_loop_nor_the_file
     steps, rrd, summary = 90, tmp_path / "file.rrd", tmp_path / "sim.json"
     with zenoh_bus() as bus, headless_viewer(tmp_path, vport, tmp_path / "viewer.rrd") as viewer:
         estimates = bus.collect("uav/*/fault/estimate")
-        with monitor_daemon(tmp_path, gains_file, port, bus, "lossy", "--rrd", str(rrd), "--rerun-url", url,
-                            "--rerun-url", nobody) as monitor:
+        with monitor_daemon(
+            tmp_path, gains_file, port, bus, "lossy", "--rrd", str(rrd), "--rerun-url", url, "--rerun-url", nobody
+        ) as monitor:
             wait_ready(monitor)
             # 15x: a sample every 67 ms, a command budget of 31 ms; at 30x, with the suite's other worker on the
             # second core, 9 of 90 commands came late (a CI run), which is the CPU, not the viewer under test
-            with sim_daemon(tmp_path, port, bus, 1, "--fault", "bias:2@20", "--summary-json", str(summary),
-                            steps=steps, speedup=15) as sim:
+            with sim_daemon(
+                tmp_path, port, bus, 1, "--fault", "bias:2@20", "--summary-json", str(summary), steps=steps, speedup=15
+            ) as sim:
                 wait_for(lambda: len(estimates) >= 40, 20, what="40 estimates")
                 os.killpg(viewer.pid, signal.SIGKILL)  # the viewer is gone mid-run, without a goodbye
                 viewer.wait(5)
@@ -99,7 +103,8 @@ def test_a_bad_viewer_address_is_one_line_and_exit_2(tmp_path: Path, gains_file:
     config.write_text(f'plant = "paper-continuous"\ngains = "{gains_file}"\nrerun_url = ["rerun+http://127.0.0.1"]\n')
     common = ["run", "--plant", "paper-continuous", "--gains", str(gains_file), "--rerun-url"]
     for argv in ([*common, "http://127.0.0.1:9876/proxy"], ["run", "--config", str(config)]):  # more: unit tests
-        out = subprocess.run([sys.executable, "-m", "monitor", *argv], capture_output=True, text=True, timeout=30,
-                             check=False)
+        out = subprocess.run(
+            [sys.executable, "-m", "monitor", *argv], capture_output=True, text=True, timeout=30, check=False
+        )
         assert out.returncode == 2, out.stderr
         assert len(out.stderr.strip().splitlines()) == 1 and "--rerun-url" in out.stderr, out.stderr

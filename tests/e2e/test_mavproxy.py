@@ -41,14 +41,39 @@ def _wait_for_tlog(tlog: Path, timeout: float = 10.0) -> None:
 
 
 def _vehicle(tmp_path: Path, port: int, *extra: str) -> Daemon:
-    args = ["run", "--steps", str(STEPS), "--speedup", str(SPEEDUP), "--mavlink", f"udpout:127.0.0.1:{port}",
-            "--no-zenoh", "--fault", "bias:2@20", "--summary-json", str(tmp_path / "vehicle.json"), *extra]
+    args = [
+        "run",
+        "--steps",
+        str(STEPS),
+        "--speedup",
+        str(SPEEDUP),
+        "--mavlink",
+        f"udpout:127.0.0.1:{port}",
+        "--no-zenoh",
+        "--fault",
+        "bias:2@20",
+        "--summary-json",
+        str(tmp_path / "vehicle.json"),
+        *extra,
+    ]
     return Daemon("sim_vehicle", args, tmp_path / "vehicle.log")
 
 
 def _monitor(tmp_path: Path, gains: Path, port: int, *extra: str, kind: str = "udpin") -> Daemon:
-    args = ["run", "--plant", "paper-continuous", "--gains", str(gains), "--mavlink", f"{kind}:127.0.0.1:{port}",
-            "--zenoh-listen", f"tcp/127.0.0.1:{free_tcp_port()}", "--name", "behind-mavproxy", *extra]
+    args = [
+        "run",
+        "--plant",
+        "paper-continuous",
+        "--gains",
+        str(gains),
+        "--mavlink",
+        f"{kind}:127.0.0.1:{port}",
+        "--zenoh-listen",
+        f"tcp/127.0.0.1:{free_tcp_port()}",
+        "--name",
+        "behind-mavproxy",
+        *extra,
+    ]
     return Daemon("monitor", args, tmp_path / "monitor.log")
 
 
@@ -80,8 +105,10 @@ def test_the_readme_block_closes_the_loop_through_mavproxy(tmp_path: Path, gains
 def test_closed_loop_with_mavproxy_listening_for_its_outputs(tmp_path: Path, gains_file: Path) -> None:
     """Either side may listen: with MAVProxy's --out=udpin the monitor's HEARTBEAT is what opens the way back."""
     monitor_port, master_port = free_udp_port(), free_udp_port()
-    with MavProxy(tmp_path, master_port, monitor_port, "udpin") as mp, \
-            _monitor(tmp_path, gains_file, monitor_port, kind="udpout") as monitor:
+    with (
+        MavProxy(tmp_path, master_port, monitor_port, "udpin") as mp,
+        _monitor(tmp_path, gains_file, monitor_port, kind="udpout") as monitor,
+    ):
         wait_ready(monitor)
         with _vehicle(tmp_path, master_port) as vehicle:
             assert vehicle.wait(60) == 0, vehicle.log()
@@ -97,8 +124,10 @@ def test_observe_only_live_and_from_mavproxys_tlog_agree(tmp_path: Path, gains_f
 
     monitor_port, master_port = free_udp_port(), free_udp_port()
     live_rrd, offline_rrd = tmp_path / "live.rrd", tmp_path / "offline.rrd"
-    with _monitor(tmp_path, gains_file, monitor_port, "--observe", "--rrd", str(live_rrd)) as monitor, \
-            MavProxy(tmp_path, master_port, monitor_port) as mp:
+    with (
+        _monitor(tmp_path, gains_file, monitor_port, "--observe", "--rrd", str(live_rrd)) as monitor,
+        MavProxy(tmp_path, master_port, monitor_port) as mp,
+    ):
         wait_ready(monitor)
         with _vehicle(tmp_path, master_port, "--autopilot", "-0.5") as vehicle:
             assert vehicle.wait(60) == 0, vehicle.log()
@@ -108,9 +137,27 @@ def test_observe_only_live_and_from_mavproxys_tlog_agree(tmp_path: Path, gains_f
     log = monitor.log()
     assert processed_count(log) == STEPS and "commands 0" in log, log[-2000:]
     assert tlog_counts(mp.tlog)[("SET_ACTUATOR_CONTROL_TARGET", 255)] == 0
-    result = subprocess.run([sys.executable, "-m", "monitor", "analyse", str(mp.tlog), "--plant", "paper-continuous",
-                             "--gains", str(gains_file), "--rrd", str(offline_rrd), "--json", "--fault", "bias:2@20"],
-                            capture_output=True, text=True, timeout=120)
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "monitor",
+            "analyse",
+            str(mp.tlog),
+            "--plant",
+            "paper-continuous",
+            "--gains",
+            str(gains_file),
+            "--rrd",
+            str(offline_rrd),
+            "--json",
+            "--fault",
+            "bias:2@20",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
     assert report["samples"] == STEPS and report["settling_steps"] is not None

@@ -36,9 +36,10 @@ def test_two_vehicles_with_different_faults_in_one_monitor(tmp_path: Path, gains
             wait_ready(monitor)
             # 10x, not 25x: one monitor serves two vehicles while the other xdist worker loads the CPU; at 25x a
             # 20-ms stall is 0.5 s of simulated delay, past the plant's interval (a CI run settled at 9, not <= 8)
-            with sim_daemon(tmp_path, port, bus, 1, "--fault", "bias:2@10", steps=40, speedup=10) as a, \
-                    sim_daemon(tmp_path, port, bus, 2, "--fault", "bias:-1@15", "--seed", "7", steps=40,
-                               speedup=10) as b:
+            with (
+                sim_daemon(tmp_path, port, bus, 1, "--fault", "bias:2@10", steps=40, speedup=10) as a,
+                sim_daemon(tmp_path, port, bus, 2, "--fault", "bias:-1@15", "--seed", "7", steps=40, speedup=10) as b,
+            ):
                 assert a.wait(30) == 0 and b.wait(30) == 0
             wait_for(lambda: len(estimates) >= 80, 30, what="80 estimates")
             assert {key for key, _ in bus.query("uav/*/fault/status")} == {"uav/1/fault/status", "uav/2/fault/status"}
@@ -52,13 +53,17 @@ def test_two_monitors_two_vehicles_one_subscriber(tmp_path: Path, gains_file: Pa
     ports = free_udp_port(), free_udp_port()
     with zenoh_bus() as bus:
         estimates = bus.collect("uav/*/fault/estimate")
-        with monitor_daemon(tmp_path, gains_file, ports[0], bus, "east") as m1, \
-                monitor_daemon(tmp_path, gains_file, ports[1], bus, "west") as m2:
+        with (
+            monitor_daemon(tmp_path, gains_file, ports[0], bus, "east") as m1,
+            monitor_daemon(tmp_path, gains_file, ports[1], bus, "west") as m2,
+        ):
             wait_ready(m1)
             wait_ready(m2)
             assert sorted(bus.tokens("uav/monitor/*")) == ["uav/monitor/east", "uav/monitor/west"]
-            with sim_daemon(tmp_path, ports[0], bus, 11, "--fault", "bias:2@10", steps=30) as a, \
-                    sim_daemon(tmp_path, ports[1], bus, 12, "--fault", "bias:1@10", steps=30) as b:
+            with (
+                sim_daemon(tmp_path, ports[0], bus, 11, "--fault", "bias:2@10", steps=30) as a,
+                sim_daemon(tmp_path, ports[1], bus, 12, "--fault", "bias:1@10", steps=30) as b,
+            ):
                 assert a.wait(30) == 0 and b.wait(30) == 0
             wait_for(lambda: len(estimates) >= 60, 30, what="60 estimates")
         assert processed_count(m1.log()) == processed_count(m2.log()) == 30
@@ -131,14 +136,14 @@ def test_packet_fuzz_does_not_stop_or_corrupt_the_loop(tmp_path: Path, gains_fil
                     fuzzer.sendto(junk, ("127.0.0.1", port))
                     upstream.sendto(junk[:64], ("127.0.0.1", port))
                     injected["junk"] += 2
-            except socket.timeout:
+            except TimeoutError:
                 pass
             try:  # commands back to the vehicle
                 while True:
                     reply = upstream.recv(4096)
                     if vehicle_addr:
                         relay.sendto(reply, vehicle_addr[0])
-            except (BlockingIOError, socket.timeout):
+            except (TimeoutError, BlockingIOError):
                 pass
 
     with zenoh_bus() as bus:

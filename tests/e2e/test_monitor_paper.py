@@ -88,7 +88,11 @@ def test_gains_for_another_plant_are_refused(tmp_path: Path, gains_file: Path) -
     import subprocess
     import sys
 
-    out = subprocess.run([sys.executable, "-m", "monitor", "run", "--plant", "paper", "--gains", str(gains_file)],
-                         capture_output=True, text=True, timeout=30)
+    out = subprocess.run(
+        [sys.executable, "-m", "monitor", "run", "--plant", "paper", "--gains", str(gains_file)],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert out.returncode == 2
     assert len(out.stderr.strip().splitlines()) == 1 and "--force" in out.stderr

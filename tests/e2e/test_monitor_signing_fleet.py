@@ -66,14 +66,42 @@ def test_signed_link_closes_the_loop_and_a_wrong_key_processes_nothing(tmp_path:
     good_json, bad_json = tmp_path / "good-sim.json", tmp_path / "bad-sim.json"
     with zenoh_bus() as bus:
         estimates = bus.collect("uav/*/fault/estimate")
-        with monitor_daemon(tmp_path, gains_file, good_port, bus, "signed", "--signing-key", str(key)) as good, \
-                monitor_daemon(tmp_path, gains_file, bad_port, bus, "wrongkey", "--signing-key", str(other)) as bad:
+        with (
+            monitor_daemon(tmp_path, gains_file, good_port, bus, "signed", "--signing-key", str(key)) as good,
+            monitor_daemon(tmp_path, gains_file, bad_port, bus, "wrongkey", "--signing-key", str(other)) as bad,
+        ):
             wait_ready(good)
             wait_ready(bad)
-            with sim_daemon(tmp_path, good_port, bus, 1, "--fault", "bias:2@10", "--signing-key", str(key),
-                            "--summary-json", str(good_json), steps=STEPS, speedup=SPEEDUP) as sim_good, \
-                    sim_daemon(tmp_path, bad_port, bus, 2, "--fault", "bias:2@10", "--signing-key", str(key),
-                               "--summary-json", str(bad_json), steps=STEPS, speedup=SPEEDUP) as sim_bad:
+            with (
+                sim_daemon(
+                    tmp_path,
+                    good_port,
+                    bus,
+                    1,
+                    "--fault",
+                    "bias:2@10",
+                    "--signing-key",
+                    str(key),
+                    "--summary-json",
+                    str(good_json),
+                    steps=STEPS,
+                    speedup=SPEEDUP,
+                ) as sim_good,
+                sim_daemon(
+                    tmp_path,
+                    bad_port,
+                    bus,
+                    2,
+                    "--fault",
+                    "bias:2@10",
+                    "--signing-key",
+                    str(key),
+                    "--summary-json",
+                    str(bad_json),
+                    steps=STEPS,
+                    speedup=SPEEDUP,
+                ) as sim_bad,
+            ):
                 assert sim_good.wait(30) == 0, sim_good.log()
                 assert sim_bad.wait(30) == 0, sim_bad.log()
             wait_for(lambda: len([e for e in estimates if e["sysid"] == 1]) >= STEPS, 30, what="signed estimates")
@@ -110,20 +138,34 @@ def test_fleet_serves_listed_vehicles_and_refuses_an_unlisted_one(tmp_path: Path
     fleet = fleet_dir / "fleet.toml"
     fleet.write_text(  # relative gains paths: relative to the fleet file, not to the monitor's cwd
         '[vehicle.1]\nplant = "paper-continuous"\ngains = "gains/certified.toml"\n\n'
-        '[vehicle.2]\nplant = "paper-continuous"\ngains = "gains/certified.toml"\n')
+        '[vehicle.2]\nplant = "paper-continuous"\ngains = "gains/certified.toml"\n'
+    )
     port = free_udp_port()
     sim3_json = tmp_path / "sim3.json"
     with zenoh_bus() as bus:
         estimates = bus.collect("uav/*/fault/estimate")
-        args = ["run", "--fleet", str(fleet), "--mavlink", f"udpin:127.0.0.1:{port}", "--zenoh-mode", "client",
-                "--zenoh-connect", bus.endpoint, "--name", "fleet"]
+        args = [
+            "run",
+            "--fleet",
+            str(fleet),
+            "--mavlink",
+            f"udpin:127.0.0.1:{port}",
+            "--zenoh-mode",
+            "client",
+            "--zenoh-connect",
+            bus.endpoint,
+            "--name",
+            "fleet",
+        ]
         with Daemon("monitor", args, tmp_path / "fleet.log") as monitor:
             wait_ready(monitor)
-            with sim_daemon(tmp_path, port, bus, 3, "--summary-json", str(sim3_json), steps=STEPS,
-                            speedup=SPEEDUP) as c, \
-                    sim_daemon(tmp_path, port, bus, 1, "--fault", "bias:2@10", steps=STEPS, speedup=SPEEDUP) as a, \
-                    sim_daemon(tmp_path, port, bus, 2, "--fault", "bias:-1@10", "--seed", "7", steps=STEPS,
-                               speedup=SPEEDUP) as b:
+            with (
+                sim_daemon(tmp_path, port, bus, 3, "--summary-json", str(sim3_json), steps=STEPS, speedup=SPEEDUP) as c,
+                sim_daemon(tmp_path, port, bus, 1, "--fault", "bias:2@10", steps=STEPS, speedup=SPEEDUP) as a,
+                sim_daemon(
+                    tmp_path, port, bus, 2, "--fault", "bias:-1@10", "--seed", "7", steps=STEPS, speedup=SPEEDUP
+                ) as b,
+            ):
                 assert a.wait(30) == 0 and b.wait(30) == 0 and c.wait(30) == 0, (a.log(), b.log(), c.log())
             wait_for(lambda: len(estimates) >= 2 * STEPS, 30, what=f"{2 * STEPS} estimates")
             assert monitor.proc.poll() is None, "the monitor stopped serving"
@@ -156,16 +198,20 @@ def test_silent_vehicle_is_forgotten_after_the_timeout(tmp_path: Path, gains_fil
                 assert first.wait(30) == 0, first.log()
             wait_for(lambda: len(estimates) >= STEPS, 30, what="first run's estimates")
             # housekeeping runs about once a second: forgotten within timeout + ~1 s (bounded generously)
-            wait_for(lambda: "vehicle sysid 5 silent for" in monitor.log(), timeout + 5,
-                     what="the silent vehicle to be dropped")
+            wait_for(
+                lambda: "vehicle sysid 5 silent for" in monitor.log(),
+                timeout + 5,
+                what="the silent vehicle to be dropped",
+            )
             first_run = list(estimates)
-            with sim_daemon(tmp_path, port, bus, 5, "--fault", "bias:-1@5", "--seed", "9", steps=STEPS,
-                            speedup=SPEEDUP) as second:  # a new process: a new ephemeral source port
+            with sim_daemon(
+                tmp_path, port, bus, 5, "--fault", "bias:-1@5", "--seed", "9", steps=STEPS, speedup=SPEEDUP
+            ) as second:  # a new process: a new ephemeral source port
                 assert second.wait(30) == 0, second.log()
             wait_for(lambda: len(estimates) >= 2 * STEPS, 30, what="second run's estimates")
             log = _stop(monitor)
 
-    second_run = estimates[len(first_run):]
+    second_run = estimates[len(first_run) :]
     assert sorted(e["k"] for e in first_run) == list(range(STEPS))
     assert sorted(e["k"] for e in second_run) == list(range(STEPS)), "the new run was not estimated from k = 0"
     # a fresh estimator: the second run's estimate converges to its own fault, with nothing of the first's

@@ -24,8 +24,12 @@ STEPS = ONSET + 11 * RATE  # 5 s before the bias, 11 s after it
 def test_a_jsbsim_aircraft_with_commands_one_to_two_and_a_half_samples_late(tmp_path: Path) -> None:
     flight = design_and_fly(tmp_path, PLANT, STEPS, "--delay", "uniform:0.05:0.12", "--fault", f"bias:{BIAS:g}@{ONSET}")
     assert "delay      past one sample" in flight.design_out, flight.design_out
-    verify = subprocess.run([sys.executable, "-m", "monitor", "verify", "--plant", PLANT, "--gains",
-                             str(tmp_path / "gains.toml")], capture_output=True, text=True, timeout=120)
+    verify = subprocess.run(
+        [sys.executable, "-m", "monitor", "verify", "--plant", PLANT, "--gains", str(tmp_path / "gains.toml")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert verify.returncode == 0 and "certificate                      valid" in verify.stdout, verify.stdout
     acted = [p["tau"] for p in flight.truth if p["tau"] is not None]
     assert len(acted) > 0.9 * STEPS and min(acted) >= 0.05 and max(acted) > 0.1  # one to 2.4 samples late

@@ -29,6 +29,7 @@ def test_clients_of_the_router_see_each_other(tmp_path: Path) -> None:
 
         subscriber = sub.declare_subscriber("uav/*/fault/estimate", on_sample)
         try:
+
             def published() -> bool:
                 pub.put("uav/7/fault/estimate", json.dumps({"sysid": 7, "k": 1}))
                 return bool(got)
@@ -42,7 +43,11 @@ def test_clients_of_the_router_see_each_other(tmp_path: Path) -> None:
 
 
 def test_an_invalid_endpoint_is_one_line_exit_2() -> None:
-    out = subprocess.run([sys.executable, "-m", "monitor", "router", "-l", "tcp/256.1.1.1:7447"],
-                         capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "monitor", "router", "-l", "tcp/256.1.1.1:7447"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 2 and "not a valid IP address" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1 and ".rs:" not in out.stderr

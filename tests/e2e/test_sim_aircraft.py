@@ -21,8 +21,11 @@ TELEMETRY = ["ATTITUDE", "AOA_SSA", "VFR_HUD", "ACTUATOR_OUTPUT_STATUS"]
 
 
 def aircraft(tmp_path: Path, port: int, *args: str, name: str = "aircraft") -> Daemon:
-    return Daemon("sim_vehicle", ["run", "--aircraft", "c172p", "--mavlink", f"udpout:127.0.0.1:{port}", "--no-zenoh",
-                                  *args], tmp_path / f"{name}.log")
+    return Daemon(
+        "sim_vehicle",
+        ["run", "--aircraft", "c172p", "--mavlink", f"udpout:127.0.0.1:{port}", "--no-zenoh", *args],
+        tmp_path / f"{name}.log",
+    )
 
 
 def read_jsonl(path: Path) -> list[dict]:
@@ -39,7 +42,7 @@ def listen(d: Daemon, rx: socket.socket, on_sample=None, timeout: float = 30.0) 
     while time.monotonic() < deadline:
         try:
             data, src = rx.recvfrom(65535)
-        except socket.timeout:
+        except TimeoutError:
             if d.proc.poll() is not None:
                 break
             continue
@@ -60,8 +63,22 @@ def test_every_sample_carries_the_contract_plus_pitch_and_airspeed_and_the_prbs_
     rx.bind(("127.0.0.1", port))
     truth_file, summary = tmp_path / "truth.jsonl", tmp_path / "summary.json"
     try:
-        with aircraft(tmp_path, port, "--rate", "20", "--steps", "200", "--speedup", "50", "--excite", "prbs:1:5",
-                      "--truth-jsonl", str(truth_file), "--summary-json", str(summary)) as d:
+        with aircraft(
+            tmp_path,
+            port,
+            "--rate",
+            "20",
+            "--steps",
+            "200",
+            "--speedup",
+            "50",
+            "--excite",
+            "prbs:1:5",
+            "--truth-jsonl",
+            str(truth_file),
+            "--summary-json",
+            str(summary),
+        ) as d:
             per_k, seen = listen(d, rx)
             assert d.wait(20) == 0, d.log()
     finally:
@@ -99,8 +116,22 @@ def test_after_its_manoeuvre_the_aircraft_follows_commands_it_ignored_during_it(
 
     truth_file, summary = tmp_path / "truth.jsonl", tmp_path / "summary.json"
     try:
-        with aircraft(tmp_path, port, "--steps", "60", "--speedup", "2", "--excite", "prbs:1:1", "--delay", "const:0.01",
-                      "--truth-jsonl", str(truth_file), "--summary-json", str(summary)) as d:
+        with aircraft(
+            tmp_path,
+            port,
+            "--steps",
+            "60",
+            "--speedup",
+            "2",
+            "--excite",
+            "prbs:1:1",
+            "--delay",
+            "const:0.01",
+            "--truth-jsonl",
+            str(truth_file),
+            "--summary-json",
+            str(summary),
+        ) as d:
             per_k, _ = listen(d, rx, on_sample=answer)
             assert d.wait(20) == 0, d.log()
     finally:
@@ -117,8 +148,21 @@ def test_after_its_manoeuvre_the_aircraft_follows_commands_it_ignored_during_it(
 def test_light_turbulence_is_the_same_flight_in_another_process_with_the_same_seed(tmp_path):
     def flight(seed: int, name: str) -> list[dict]:
         path = tmp_path / f"{name}.jsonl"
-        with aircraft(tmp_path, free_udp_port(), "--steps", "80", "--speedup", "1000", "--turbulence", "light",
-                      "--seed", str(seed), "--truth-jsonl", str(path), name=name) as d:
+        with aircraft(
+            tmp_path,
+            free_udp_port(),
+            "--steps",
+            "80",
+            "--speedup",
+            "1000",
+            "--turbulence",
+            "light",
+            "--seed",
+            str(seed),
+            "--truth-jsonl",
+            str(path),
+            name=name,
+        ) as d:
             assert d.wait(20) == 0, d.log()
         return read_jsonl(path)
 
@@ -135,8 +179,18 @@ def test_mavproxy_records_the_manoeuvre_in_its_tlog(tmp_path):
     master, out = free_udp_port(), free_udp_port()
     steps = 120
     with MavProxy(tmp_path, master, out) as mp:
-        with aircraft(tmp_path, master, "--steps", str(steps), "--speedup", "10", "--excite", "prbs:2:4",
-                      "--truth-jsonl", str(tmp_path / "truth.jsonl")) as d:
+        with aircraft(
+            tmp_path,
+            master,
+            "--steps",
+            str(steps),
+            "--speedup",
+            "10",
+            "--excite",
+            "prbs:2:4",
+            "--truth-jsonl",
+            str(tmp_path / "truth.jsonl"),
+        ) as d:
             assert d.wait(30) == 0, d.log()
 
         def records() -> dict[str, dict[int, object]]:

@@ -41,7 +41,7 @@ def datagrams(d: Daemon, rx: socket.socket, timeout: float = 30.0):
     while d.proc.poll() is None and time.monotonic() < deadline:
         try:
             yield rx.recvfrom(4096)
-        except socket.timeout:
+        except TimeoutError:
             continue
 
 
@@ -57,9 +57,23 @@ def test_plain_pymavlink_client_reads_the_vehicle_and_closes_the_loop(tmp_path):
     conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="ardupilotmega", source_system=255)
     seen: dict[str, list] = {"HEARTBEAT": [], "ATTITUDE": [], "AOA_SSA": [], "ACTUATOR_OUTPUT_STATUS": []}
     try:
-        with vehicle(tmp_path, port, "--steps", "30", "--speedup", "10", "--no-zenoh", "--fault", "bias:2@10",
-                     "--x0", "1,0", "--truth-jsonl", str(tmp_path / "truth.jsonl"),
-                     "--summary-json", str(tmp_path / "summary.json")) as d:
+        with vehicle(
+            tmp_path,
+            port,
+            "--steps",
+            "30",
+            "--speedup",
+            "10",
+            "--no-zenoh",
+            "--fault",
+            "bias:2@10",
+            "--x0",
+            "1,0",
+            "--truth-jsonl",
+            str(tmp_path / "truth.jsonl"),
+            "--summary-json",
+            str(tmp_path / "summary.json"),
+        ) as d:
             deadline = time.monotonic() + 30
             while d.proc.poll() is None and time.monotonic() < deadline:
                 msg = conn.recv_match(blocking=True, timeout=0.2)
@@ -106,10 +120,24 @@ def test_truth_reaches_a_zenoh_subscriber_as_json(tmp_path):
     zport = free_tcp_port()
     session = open_session(build_config(listen=[f"tcp/127.0.0.1:{zport}"]))
     got: list = []
-    sub = session.declare_subscriber("e2e/**", lambda s: got.append((str(s.key_expr), s.encoding, s.payload.to_bytes())))
+    sub = session.declare_subscriber(
+        "e2e/**", lambda s: got.append((str(s.key_expr), s.encoding, s.payload.to_bytes()))
+    )
     try:
-        with vehicle(tmp_path, free_udp_port(), "--steps", "12", "--speedup", "8", "--sysid", "7",
-                     "--key-prefix", "e2e/net1", "--zenoh-connect", f"tcp/127.0.0.1:{zport}") as d:
+        with vehicle(
+            tmp_path,
+            free_udp_port(),
+            "--steps",
+            "12",
+            "--speedup",
+            "8",
+            "--sysid",
+            "7",
+            "--key-prefix",
+            "e2e/net1",
+            "--zenoh-connect",
+            f"tcp/127.0.0.1:{zport}",
+        ) as d:
             assert d.wait(20) == 0, d.log()
         wait_for(lambda: any(json.loads(p)["k"] == 11 for _, _, p in got), 30, what="the last truth sample")
     finally:
@@ -137,8 +165,11 @@ def test_garbage_and_unsigned_commands_are_counted_and_signed_ones_applied(tmp_p
     port, bind = free_udp_port(), free_udp_port()
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", port))
-    good, unsigned, forger = new_codec(255, MONITOR_COMPONENT), new_codec(255, MONITOR_COMPONENT), new_codec(
-        255, MONITOR_COMPONENT)
+    good, unsigned, forger = (
+        new_codec(255, MONITOR_COMPONENT),
+        new_codec(255, MONITOR_COMPONENT),
+        new_codec(255, MONITOR_COMPONENT),
+    )
     enable_signing(good, key)
     enable_signing(forger, os.urandom(32))
     verifier = new_codec(255, MONITOR_COMPONENT)
@@ -146,8 +177,21 @@ def test_garbage_and_unsigned_commands_are_counted_and_signed_ones_applied(tmp_p
     target = ("127.0.0.1", bind)
     sent_bad = 0
     try:
-        with vehicle(tmp_path, port, "--steps", "20", "--speedup", "10", "--no-zenoh", "--bind", f"127.0.0.1:{bind}",
-                     "--signing-key", str(tmp_path / "key.hex"), "--summary-json", str(tmp_path / "s.json")) as d:
+        with vehicle(
+            tmp_path,
+            port,
+            "--steps",
+            "20",
+            "--speedup",
+            "10",
+            "--no-zenoh",
+            "--bind",
+            f"127.0.0.1:{bind}",
+            "--signing-key",
+            str(tmp_path / "key.hex"),
+            "--summary-json",
+            str(tmp_path / "s.json"),
+        ) as d:
             for data, _ in datagrams(d, rx):
                 msgs = verifier.parse_buffer(data) or []
                 assert msgs and all(m.get_type() != "BAD_DATA" for m in msgs)  # the vehicle signs its frames
@@ -156,8 +200,12 @@ def test_garbage_and_unsigned_commands_are_counted_and_signed_ones_applied(tmp_p
                         continue
                     k = sample_index(m.time_usec, 1.0)
                     frame = encode_command(good, Command(1, k, 1.0), 1.0)
-                    for junk in (os.urandom(64), frame[:17], encode_command(unsigned, Command(1, k, 9.0), 1.0),
-                                 encode_command(forger, Command(1, k, 9.0), 1.0)):
+                    for junk in (
+                        os.urandom(64),
+                        frame[:17],
+                        encode_command(unsigned, Command(1, k, 9.0), 1.0),
+                        encode_command(forger, Command(1, k, 9.0), 1.0),
+                    ):
                         rx.sendto(junk, target)
                         sent_bad += 1
                     rx.sendto(frame, target)
@@ -174,8 +222,15 @@ def test_garbage_and_unsigned_commands_are_counted_and_signed_ones_applied(tmp_p
 def test_user_errors_are_one_line_and_exit_2(tmp_path):
     bad_config = tmp_path / "v.toml"
     bad_config.write_text('dealy = "const:0.1"\n')
-    cases = [["--fault", "bias@2"], ["--delay", "uniform:2:1"], ["--plant", "nope"], ["--sysid", "300"],
-             ["--mavlink", "tcp:1.2.3.4:5"], ["--config", str(bad_config)], ["--loss", "2"]]
+    cases = [
+        ["--fault", "bias@2"],
+        ["--delay", "uniform:2:1"],
+        ["--plant", "nope"],
+        ["--sysid", "300"],
+        ["--mavlink", "tcp:1.2.3.4:5"],
+        ["--config", str(bad_config)],
+        ["--loss", "2"],
+    ]
     for extra in cases:
         with vehicle(tmp_path, free_udp_port(), "--no-zenoh", *extra, name="err") as d:
             assert d.wait(20) == 2, (extra, d.log())
@@ -189,8 +244,9 @@ def test_help_and_config_file(tmp_path):
         assert "--fault" in d.log() and "udpout" in d.log() and "examples" in d.log()
     conf = tmp_path / "v.toml"
     conf.write_text(f'steps = 3\nspeedup = 20\nno_zenoh = true\nmavlink = "udpout:127.0.0.1:{free_udp_port()}"\n')
-    with Daemon("sim_vehicle", ["run", "--config", str(conf), "--summary-json", str(tmp_path / "s.json")],
-                tmp_path / "conf.log") as d:
+    with Daemon(
+        "sim_vehicle", ["run", "--config", str(conf), "--summary-json", str(tmp_path / "s.json")], tmp_path / "conf.log"
+    ) as d:
         assert d.wait(20) == 0, d.log()
     assert json.loads((tmp_path / "s.json").read_text())["samples"]["taken"] == 3
 
@@ -207,9 +263,25 @@ def test_emulated_loss_duplication_and_reordering_follow_the_seeded_draws(tmp_pa
     answered: set[int] = set()
     arrivals: list[int] = []
     try:
-        with vehicle(tmp_path, port, "--steps", str(steps), "--speedup", "10", "--no-zenoh", "--seed", str(seed),
-                     "--loss", "0.2", "--duplicate", "0.2", "--reorder", "0.1",
-                     "--summary-json", str(tmp_path / "s.json")) as d:
+        with vehicle(
+            tmp_path,
+            port,
+            "--steps",
+            str(steps),
+            "--speedup",
+            "10",
+            "--no-zenoh",
+            "--seed",
+            str(seed),
+            "--loss",
+            "0.2",
+            "--duplicate",
+            "0.2",
+            "--reorder",
+            "0.1",
+            "--summary-json",
+            str(tmp_path / "s.json"),
+        ) as d:
             for data, src in datagrams(d, rx):
                 for m in parser.parse_buffer(data) or []:
                     if m.get_type() == "AOA_SSA":

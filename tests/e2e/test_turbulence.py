@@ -20,13 +20,14 @@ STEPS = ONSET + 20 * RATE
 
 
 def test_a_bias_through_light_turbulence_no_false_alarm_detected_within_two_seconds(tmp_path: Path) -> None:
-    flight = design_and_fly(tmp_path, PLANT, STEPS, "--turbulence", "light", "--seed", "21", "--fault",
-                            f"bias:{BIAS:g}@{ONSET}")
+    flight = design_and_fly(
+        tmp_path, PLANT, STEPS, "--turbulence", "light", "--seed", "21", "--fault", f"bias:{BIAS:g}@{ONSET}"
+    )
     assert "low-passed with a 1-s time constant" in flight.design_out, flight.design_out  # the default in turbulence
     raised = flight.alarms()
     assert raised and min(raised) >= ONSET, f"alarms at k = {raised}: a false alarm before the onset at {ONSET}"
     assert min(raised) <= ONSET + 2 * RATE, f"the bias detected {(min(raised) - ONSET) / RATE:g} s after onset"
     errors = flight.errors(ONSET + 2 * RATE, STEPS)
     assert len(errors) >= 0.95 * (STEPS - ONSET - 2 * RATE)
-    rms = float(np.sqrt(np.mean(errors ** 2)))
+    rms = float(np.sqrt(np.mean(errors**2)))
     assert rms <= 0.3, f"|e_f| RMS {rms:.3f} deg from 2 s after onset"

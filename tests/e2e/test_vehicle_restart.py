@@ -42,8 +42,11 @@ class RestartedPeer(PeerVehicle):
         out = super().frames(k)
         if k != 0:
             return out
-        self.codec.send(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_FIXED_WING, mavlink.MAV_AUTOPILOT_GENERIC,
-                                                          0, 0, mavlink.MAV_STATE_ACTIVE, 3))
+        self.codec.send(
+            mavlink.MAVLink_heartbeat_message(
+                mavlink.MAV_TYPE_FIXED_WING, mavlink.MAV_AUTOPILOT_GENERIC, 0, 0, mavlink.MAV_STATE_ACTIVE, 3
+            )
+        )
         heartbeat = self.codec.file.take()
         return [heartbeat, *sorted(out, key=lambda frame: _msgid(frame) == mavlink.MAVLINK_MSG_ID_AOA_SSA)]
 
@@ -55,8 +58,13 @@ def _msgid(frame: bytes) -> int:
 
 def _replay(rrd: Path, sysid: int) -> dict:
     """``fault-monitor replay --json`` as a user runs it, for one vehicle."""
-    done = subprocess.run([sys.executable, "-m", "monitor", "replay", str(rrd), "--json", "--sysid", str(sysid)],
-                          capture_output=True, text=True, timeout=60, cwd=REPO)
+    done = subprocess.run(
+        [sys.executable, "-m", "monitor", "replay", str(rrd), "--json", "--sysid", str(sysid)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=REPO,
+    )
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout)
 
@@ -87,8 +95,10 @@ def test_a_pymavlink_vehicle_restarted_from_a_new_port_after_a_heartbeat(tmp_pat
     assert check_against_equations(plant, gains, second.wire, list(range(STEPS))) == STEPS  # from a fresh state
     report = _replay(rrd, SYSID)
     assert report["runs"] == 2 and report["samples"] >= 110 and report["last_run_samples"] >= 55, report
-    print(f"pymavlink restart: processed {processed}/{2 * STEPS}, replay runs {report['runs']}, "
-          f"samples {report['samples']}")
+    print(
+        f"pymavlink restart: processed {processed}/{2 * STEPS}, replay runs {report['runs']}, "
+        f"samples {report['samples']}"
+    )
 
 
 def test_sim_vehicle_restarted_under_the_same_sysid(tmp_path: Path, quick_gains: Path) -> None:
@@ -109,5 +119,7 @@ def test_sim_vehicle_restarted_under_the_same_sysid(tmp_path: Path, quick_gains:
     assert processed >= 110 and _restarts(log) == 1, log[-3000:]
     report = _replay(rrd, SYSID)
     assert report["runs"] == 2 and report["samples"] >= 110, report
-    print(f"sim-vehicle restart: processed {processed}/{2 * STEPS}, replay runs {report['runs']}, "
-          f"samples {report['samples']}")
+    print(
+        f"sim-vehicle restart: processed {processed}/{2 * STEPS}, replay runs {report['runs']}, "
+        f"samples {report['samples']}"
+    )

@@ -39,8 +39,9 @@ class Wire:
 class PeerVehicle:
     """Discrete plant x+ = A x + B0 u(k) + B1 u(k-1) + Df f; telemetry per the contract, any framing."""
 
-    def __init__(self, plant, sysid: int, seed: int, outputs: str = "alpha", fault_at: int = 20,
-                 bias: float = 2.0) -> None:
+    def __init__(
+        self, plant, sysid: int, seed: int, outputs: str = "alpha", fault_at: int = 20, bias: float = 2.0
+    ) -> None:
         self.k_next = 0  # flights continue where the last one stopped (a reconnect)
         self.plant, self.sysid, self.rng = plant, sysid, random.Random(seed)
         self.codec = new_codec(sysid, 1)
@@ -58,9 +59,11 @@ class PeerVehicle:
         a32, q32, e32 = (float(np.float32(v)) for v in (alpha, q / DEG, self.u_applied))
         self.wire.y[k] = [a32] if self.outputs == "alpha" else [a32, float(np.float32(q32 * np.float32(DEG)))]
         self.wire.reported[k] = e32
-        msgs = [mavlink.MAVLink_attitude_message((t_us // 1000) & 0xFFFFFFFF, 0, 0, 0, 0, q / DEG, 0),
-                mavlink.MAVLink_aoa_ssa_message(t_us, alpha, 0.0),
-                mavlink.MAVLink_actuator_output_status_message(t_us, 1, [self.u_applied] + [0.0] * 31)]
+        msgs = [
+            mavlink.MAVLink_attitude_message((t_us // 1000) & 0xFFFFFFFF, 0, 0, 0, 0, q / DEG, 0),
+            mavlink.MAVLink_aoa_ssa_message(t_us, alpha, 0.0),
+            mavlink.MAVLink_actuator_output_status_message(t_us, 1, [self.u_applied] + [0.0] * 31),
+        ]
         self.rng.shuffle(msgs)
         out = []
         for m in msgs:
@@ -100,8 +103,9 @@ def read_gains(path: Path) -> dict[str, np.ndarray]:
     return {n: np.array(g[n], dtype=float) for n in ("L", "M", "K1", "K2", "K3")}
 
 
-def check_against_equations(plant, gains: dict[str, np.ndarray], wire: Wire, ks: list[int], limit: float = 30.0,
-                            tol: float = 1e-3) -> int:
+def check_against_equations(
+    plant, gains: dict[str, np.ndarray], wire: Wire, ks: list[int], limit: float = 30.0, tol: float = 1e-3
+) -> int:
     """Eqs. (5)-(6) on the wire's values; returns how many commands were compared."""
     A, B0, B1, C, Df = plant.A, plant.B0, plant.B1, plant.C, plant.Df
     x, f = np.zeros(plant.n), np.zeros(plant.q)
@@ -137,7 +141,7 @@ def fly_udp(peer: PeerVehicle, port: int, steps: int, wait_s: float = 1.0, linge
         while time.monotonic() < deadline and "HEARTBEAT" not in peer.wire.other:
             try:
                 peer.receive(sock.recv(65535))
-            except socket.timeout:
+            except TimeoutError:
                 continue
 
 
@@ -175,5 +179,5 @@ def _await(recv, peer: PeerVehicle, k: int, wait_s: float) -> None:
     while time.monotonic() < deadline and not (k in peer.wire.commands and k in peer.wire.fhat):
         try:
             peer.receive(recv())
-        except (socket.timeout, BlockingIOError):
+        except (TimeoutError, BlockingIOError):
             continue
