@@ -212,7 +212,8 @@ def check_gains(plant: Plant, gains: Gains, result: DesignResult | None = None) 
 
 
 def check_losses(plant: Plant, gains: Gains, max_losses: int, result: DesignResult | None = None) -> LossVerdict:
-    """``verify --max-losses N``'s loss verdict (``stable`` True only with a proof; see monitor.checks.verify_losses)."""
+    """``verify --max-losses N``'s loss verdict (``stable`` True only with a proof; see
+    monitor.checks.verify_losses)."""
     from monitor.checks.verify_losses import verify_losses
 
     return verify_losses(plant, gains, max_losses, result.certificate if result else None)
@@ -220,7 +221,8 @@ def check_losses(plant: Plant, gains: Gains, max_losses: int, result: DesignResu
 
 @dataclass
 class SimulatedRun(Trace):
-    """One simulated run of the loop (numpy arrays per sample, as ``Trace``) and its scores, as ``replay`` computes them."""
+    """One simulated run of the loop (numpy arrays per sample, as ``Trace``) and its scores, as ``replay``
+    computes them."""
 
     settling_steps: int | None = None
     rms_ef: float | None = None

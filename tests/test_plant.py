@@ -41,7 +41,8 @@ def test_digest_depends_on_content_not_formatting():
         'form="discrete"\nh=1.0\ntau_min=0.0\ntau_max=0.4\nA=[[0.5]]\nB0=[[1.0]]\nB1=[[0.1]]\nC=[[1.0]]\nDf=[[1.0]]\nDd=[[1.0]]\n'
     )
     b = parse_plant(
-        'form = "discrete"\nh = 1.0\ntau_min = 0.0\ntau_max = 0.4\nA = [[ 0.5 ]]\nB0 = [[1.0]]\nB1 = [[0.1]]\nC = [[1.0]]\nDf = [[1.0]]\nDd = [[1.0]]\n'
+        'form = "discrete"\nh = 1.0\ntau_min = 0.0\ntau_max = 0.4\nA = [[ 0.5 ]]\n'
+        "B0 = [[1.0]]\nB1 = [[0.1]]\nC = [[1.0]]\nDf = [[1.0]]\nDd = [[1.0]]\n"
     )
     c = parse_plant(
         'form="discrete"\nh=1.0\ntau_min=0.0\ntau_max=0.4\nA=[[0.6]]\nB0=[[1.0]]\nB1=[[0.1]]\nC=[[1.0]]\nDf=[[1.0]]\nDd=[[1.0]]\n'

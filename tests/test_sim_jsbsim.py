@@ -211,7 +211,8 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
     [
         (
             ["--aircraft", "c172p", "--airspeed", "300"],
-            "--aircraft c172p does not trim at 300 kt, 3000 ft: Trim Failed (Sorry, udot doesn't appear to be trimmable)",
+            "--aircraft c172p does not trim at 300 kt, 3000 ft: "
+            "Trim Failed (Sorry, udot doesn't appear to be trimmable)",
         ),
         (["--aircraft", "no-such-plane"], "--aircraft no-such-plane: JSBSim has no such aircraft"),
         (["--aircraft", "c172p", "--wind", "paper"], "--wind does not go with --aircraft"),

@@ -1,4 +1,5 @@
-"""The checks on gains: verify, losses, margin, threshold, metrics (the norms they share with the designs live in ``monitor.model.norms``).
+"""The checks on gains: verify, losses, margin, threshold, metrics (the norms they share with the designs live
+in ``monitor.model.norms``).
 
 Independent of the designs they judge: nothing here trusts what a design claims without recomputing it.
 """

@@ -180,7 +180,8 @@ def _noise_at(
 
 
 def upcrossing_rate(level: float, std: float, rho: float, h: float) -> float:
-    """Rice: upcrossings of ``level`` per second by a stationary Gaussian sequence (std, lag-one correlation, step h)."""
+    """Rice: upcrossings of ``level`` per second by a stationary Gaussian sequence (std, lag-one correlation,
+    step h)."""
     if std <= 0:
         return 0.0
     return math.sqrt(2.0 * max(1.0 - rho, 0.0)) / (2.0 * math.pi * h) * math.exp(-0.5 * (level / std) ** 2)
@@ -388,7 +389,8 @@ def detectability(
 ) -> Detectability:
     """The figures described in the module docstring; exactly one of ``disturbance_bound`` and ``turbulence``.
 
-    ``report_time_constant``: the low-pass of the reported estimate the alarm watches (the gains' fault_time_constant)."""
+    ``report_time_constant``: the low-pass of the reported estimate the alarm watches (the gains'
+    fault_time_constant)."""
     if (disturbance_bound is None) == (turbulence is None):
         raise UserError("give exactly one of --turbulence LEVEL and --disturbance-bound D")
     if not (within_s > 0 and math.isfinite(within_s)):

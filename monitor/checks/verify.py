@@ -144,7 +144,8 @@ def _check_certificate(
         if res.status != 0:
             return (
                 False,
-                f"uncertain point {i} (of {len(points)}; the first are the constant delays) lies outside the certificate's polytope",
+                f"uncertain point {i} (of {len(points)}; the first are the constant delays) lies outside the "
+                "certificate's polytope",
             )
     if np.min(np.linalg.eigvalsh(P)) <= 0 or np.min(np.linalg.eigvalsh(Q)) <= 0:
         return False, "certificate matrices are not positive definite"

@@ -115,7 +115,8 @@ def run(args: argparse.Namespace) -> int:
     plant = load_plant(args.plant)
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     say(
-        f"designing ({args.method}) for plant '{plant.name}' ({plant.source}), tau in [{plant.tau_min}, {plant.tau_max}] s ..."
+        f"designing ({args.method}) for plant '{plant.name}' ({plant.source}), "
+        f"tau in [{plant.tau_min}, {plant.tau_max}] s ..."
     )
     if args.method == "certified" and args.verbose and not args.quiet:
         options["progress"] = lambda i, g: say(

@@ -81,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
 
     top = search_ceiling(plant, args.up_to)
     say(
-        f"bisecting tau_max in [{plant.tau_min}, {top:g}) for plant '{plant.name}' ({args.objective} design at each probe)"
+        f"bisecting tau_max in [{plant.tau_min}, {top:g}) for plant '{plant.name}' "
+        f"({args.objective} design at each probe)"
     )
     margin = delay_margin(
         plant,

@@ -12,7 +12,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "verify",
         help="check any gains on the real closed loop for every delay in the interval; exit 0 iff stable",
         description=(
-            "Build the real closed loop (plant with the u(k-1) state, observer (5), controller (6)) from the plant and\n"
+            "Build the real closed loop (plant with the u(k-1) state, observer (5), controller (6)) "
+            "from the plant and\n"
             "the gains alone, and report: the worst spectral radius over a dense grid of constant delays, the growth\n"
             "rate under randomly time-varying delays, the worst H-infinity norms w=[d; delta f] -> e_f and -> y\n"
             "(frequency sweep), and, when the gains file carries one, the certificate re-checked in numpy.\n"

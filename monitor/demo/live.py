@@ -1,8 +1,8 @@
 """One live run of the paper scenario: real `sim-vehicle` and `fault-monitor run` daemons on loopback.
 
-The demo's own process is the Zenoh meeting point (a router session): it listens on a free loopback TCP port, both daemons
-connect to it as clients (no zenohd, no multicast), and it subscribes to the estimates and the ground truth to show
-progress. The scores come from the monitor's .rrd recording (the same code as `fault-monitor replay`),
+The demo's own process is the Zenoh meeting point (a router session): it listens on a free loopback TCP port, both
+daemons connect to it as clients (no zenohd, no multicast), and it subscribes to the estimates and the ground truth to
+show progress. The scores come from the monitor's .rrd recording (the same code as `fault-monitor replay`),
 so what the table says can be recomputed from the files it leaves behind.
 
 Every daemon is started in its own process group and stopped in a ``finally`` (SIGTERM, then SIGKILL after
@@ -81,7 +81,8 @@ class Scenario:
         return ["--plant", self.plant, "--wind", self.wind]
 
     def wall_budget(self) -> float:
-        """Seconds the vehicle may take to fly ``steps`` at ``speedup``, with room for start-up (the paper's h is 1 s)."""
+        """Seconds the vehicle may take to fly ``steps`` at ``speedup``, with room for start-up (the paper's h
+        is 1 s)."""
         h = 1.0 / self.aircraft.rate if self.aircraft is not None else 1.0
         return self.steps * h / self.speedup + 30.0
 

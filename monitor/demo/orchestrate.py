@@ -417,7 +417,10 @@ def _monte_carlo(
         f"\nMonte-Carlo over {opt.runs} delay seeds from {sc.seed} ({plant.name}, fault {sc.fault}, delay {sc.delay} s,"
         f" {sc.steps} samples; simulation only)\n"
     )
-    head = f"{'design':<15} {'real loop':<9} {'settled':>8} {'settling mean':>14} {'worst':>6} {'RMS e_f':>9} {'worst |alpha|':>14}"
+    head = (
+        f"{'design':<15} {'real loop':<9} {'settled':>8} {'settling mean':>14} {'worst':>6} {'RMS e_f':>9} "
+        f"{'worst |alpha|':>14}"
+    )
     print(head)
     print("-" * len(head))
     for m, r in results.items():

@@ -56,8 +56,9 @@ def q_caption(plant: Plant, fault, steps: int) -> tuple[str, float | None]:
     s = held_output_steady_state(plant, f)
     q, u = float(s.x[1]), float(s.u[0])
     text = (
-        f"Why q settles off zero: K3 cancels the fault in the measured alpha only (C = [1 0]). Holding alpha = 0 against "
-        f"f = {f:g} {plant.unit} takes\nu = {u:.2f} {plant.unit}, and the plant's steady state then fixes q = {q:.2f} "
+        "Why q settles off zero: K3 cancels the fault in the measured alpha only (C = [1 0]). "
+        f"Holding alpha = 0 against f = {f:g} {plant.unit} takes\nu = {u:.2f} {plant.unit}, "
+        f"and the plant's steady state then fixes q = {q:.2f} "
         f"{plant.unit}/s (dotted line): the fault enters through D_cf, not parallel to the\nelevator's B_c, so one "
         f"deflection cannot null both equations. Every design whose K3 cancels the fault settles there; the paper's "
         f"Lemma-3 K3\ndoes not, so its alpha and q settle elsewhere. q is not measured, so no design regulates it."

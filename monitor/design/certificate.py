@@ -6,10 +6,10 @@ matrices alone. The Bounded Real Lemma at every vertex ``i`` of the polytope tha
 
     [[A_i^T X A_i - X, A_i^T X B_i, C^T], [B_i^T X A_i, B_i^T X B_i - g I, 0], [C, 0, -I]] < 0,
 
-with one X for all vertices (P for ``e_f``, Q for ``y~``, found by two separate problems) proves stability and the bound ``sqrt(g)`` for
-arbitrarily time-varying ``tau(k)``, with ``X > 0``: exactly the claim ``verify`` re-checks in numpy. These blocks
-are smaller than the slack form the joint design needs (no G), so the solve is a few tens of milliseconds on a
-one-sample delay.
+with one X for all vertices (P for ``e_f``, Q for ``y~``, found by two separate problems) proves stability and the
+bound ``sqrt(g)`` for arbitrarily time-varying ``tau(k)``, with ``X > 0``: exactly the claim ``verify`` re-checks in
+numpy. These blocks are smaller than the slack form the joint design needs (no G), so the solve is a few tens of
+milliseconds on a one-sample delay.
 """
 
 from __future__ import annotations

@@ -16,8 +16,8 @@ possible, and it diverges when every other sample is lost. Two facts give a bett
    ``gamma_e^2 + weight_y * gamma_z^2`` while the energy of ``e_f`` that a unit step fault leaves after
    the two deadbeat samples, at constant ``tau_min``, constant ``tau_max`` and alternating between them,
    stays within ``mismatch`` (1 % of the step's energy by default), and K2's spectral radius stays
-   <= 0.9 (a controller whose own memory grows would wind up when the actuator saturates). The search uses cheap numpy proxies
-   (frozen-delay H-infinity norms, the mismatch simulation); only the result is certified.
+   <= 0.9 (a controller whose own memory grows would wind up when the actuator saturates). The search uses cheap
+   numpy proxies (frozen-delay H-infinity norms, the mismatch simulation); only the result is certified.
 3. **Certificate.** One common Lyapunov pair over the delay polytope (``monitor.design.certificate``):
    the same kind of claim as the joint H-infinity design, re-checked by ``verify``.
 """

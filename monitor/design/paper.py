@@ -118,6 +118,7 @@ def design_paper(plant: Plant, weight_y: float = 0.1, **_ignored: Any) -> Design
             "Theorem 1 with repairs: full P, Q; G coupling e_x and e_f; -P_t/-Q_t on Psi's diagonal; "
             "d_tau in R^n; exact G1^T B0 = B0 G1_hat",
             f"K2 = -B0^+ B1, K3 = -B0^+ Df (Lemma 3); rank[B0 B1] = {rank_b1}, rank[B0 Df] = {rank_df}, "
-            f"rank B0 = {np.linalg.matrix_rank(B0)}: Lemma 3 {'holds' if rank_b1 == rank_df == np.linalg.matrix_rank(B0) else 'FAILS'}",
+            f"rank B0 = {np.linalg.matrix_rank(B0)}: "
+            f"Lemma 3 {'holds' if rank_b1 == rank_df == np.linalg.matrix_rank(B0) else 'FAILS'}",
         ],
     )

@@ -7,8 +7,8 @@ for a vehicle whose telemetry never becomes a sample, and the one WARNING when a
 MAVLink 1 frames.
 
 Shutdown (SIGINT/SIGTERM): stop reading, log the summary, drain the Zenoh queue (bounded), close the
-recorder (which flushes and writes the footer; live viewers get a bounded wait), undeclare everything and close the session (bounded),
-exit 0. A second signal during shutdown is ignored rather than leaving a half-written recording.
+recorder (which flushes and writes the footer; live viewers get a bounded wait), undeclare everything and close the
+session (bounded), exit 0. A second signal during shutdown is ignored rather than leaving a half-written recording.
 """
 
 from __future__ import annotations

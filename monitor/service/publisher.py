@@ -5,10 +5,10 @@ references (no JSON, no copies) to a deque whose length it checks against ``queu
 thread wakes every ``poll_s`` (2 ms), turns what is pending into JSON and puts it with
 ``CongestionControl.BLOCK`` (so Zenoh itself does not drop in bursts). Why polling instead of a
 blocking queue: waking the thread on every sample made it fight the loop for the GIL on each sample
-(measured: +30 us per sample, benchmarks/bench_monitor.py); a 2 ms poll costs at most 2 ms of latency. If subscribers or the network fall behind, the thread
-blocks, the queue fills, and the loop drops *new estimates* (counted in ``dropped`` and logged at most
-every 5 s) instead of blocking. Alarm events are never dropped: they are rare, bounded by the
-hysteresis, and the one thing a listener must not miss. The status queryable always answers the
+(measured: +30 us per sample, benchmarks/bench_monitor.py); a 2 ms poll costs at most 2 ms of latency. If
+subscribers or the network fall behind, the thread blocks, the queue fills, and the loop drops *new estimates*
+(counted in ``dropped`` and logged at most every 5 s) instead of blocking. Alarm events are never dropped: they are
+rare, bounded by the hysteresis, and the one thing a listener must not miss. The status queryable always answers the
 newest estimate, dropped from the stream or not, because the loop stores it before the hand-off.
 """
 

@@ -166,7 +166,8 @@ def test_nan_spoofing_far_future_and_flood(tmp_path: Path, gains_file: Path) -> 
         for e in sorted(estimates, key=lambda e: e["k"])
     ]
     assert settled is not None and settled - ONSET <= 8, (
-        f"settled at {settled}: {trace[ONSET - 2 : ONSET + 14]}; true tau max {max((t['tau'] or 0) for t in truth):.3f} s over {len(truth)}"
+        f"settled at {settled}: {trace[ONSET - 2 : ONSET + 14]}; "
+        f"true tau max {max((t['tau'] or 0) for t in truth):.3f} s over {len(truth)}"
     )
     assert _summary(log, "rejected values") == 1 and _summary(log, "future") == 1
     assert _summary(log, "foreign source") > 0 and _summary(log, "garbage") > 0

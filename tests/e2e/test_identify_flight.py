@@ -17,7 +17,8 @@ def _cli(*argv: str, timeout: float = 150.0) -> subprocess.CompletedProcess:
 
 
 def test_identify_writes_a_plant_the_chain_takes_as_it_is(tmp_path) -> None:
-    """On a log written here (not by sim-vehicle); design and verify on such a plant: tests/e2e/test_aircraft_chain.py."""
+    """On a log written here (not by sim-vehicle); design and verify on such a plant:
+    tests/e2e/test_aircraft_chain.py."""
     log, plant_file = tmp_path / "c172p.tlog", tmp_path / "c172p.toml"
     write_tlog(log, fly())
 
