@@ -22,7 +22,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from tests.c172p_flights import fly, write_tlog
+from tests.c172p_flights import fly, write_tlog  # noqa: E402 - found through the sys.path entry above
 
 
 def in_process(log: Path) -> tuple[float, float, int]:

@@ -281,7 +281,7 @@ def monte_carlo(
                 "predicted_per_hour": 2 * 3600 * upcrossing_rate(c, std, rho, h),
                 "observed_per_hour": float(n) / hours,
             }
-            for c, n in zip(levels, crossings)
+            for c, n in zip(levels, crossings, strict=True)
         ],
         bias=prediction.bias,
         detected_within=sum(t is not None for t in detections),

@@ -120,7 +120,7 @@ def score_vehicle(series: VehicleSeries, fault_spec: str | None = None, tol: flo
         rms_ef = metrics.rms_error(k[known], f_hat[known], fault.f[known])
         if onset is not None:
             rms_ef_post = metrics.rms_error(k[known], f_hat[known], fault.f[known], start=onset)
-    t_of = dict(zip(k.tolist(), t.tolist()))
+    t_of = dict(zip(k.tolist(), t.tolist(), strict=True))
     processing = [r.processing_s * 1e3 for r in s]
     return {
         "sysid": series.sysid,

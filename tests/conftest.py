@@ -19,6 +19,9 @@ open): the test extra and constraints.txt hold pytest below 9.2 until xdist foll
 from __future__ import annotations
 
 import os
+from pathlib import Path
+
+import pytest
 
 # One BLAS thread per test process (set before numpy loads; inherited by the daemons and commands the tests
 # start). The matrices here are at most ~30x30, so threads only add overhead, and two xdist workers on two cores
@@ -26,11 +29,7 @@ import os
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-from pathlib import Path
-
-import pytest
-
-from tests.designs import CACHE_ENV
+from tests.designs import CACHE_ENV  # noqa: E402 - it imports numpy, which must come after the setting above
 
 E2E = Path(__file__).resolve().parent / "e2e"
 # end-to-end modules whose verdicts do not hang on the wall-clock pace of a closed loop (a vehicle alone,

@@ -52,7 +52,7 @@ T0_US = 183_456_789  # the autopilot's boot time at the first sample: any phase 
 
 def _pack(name: str, values: list) -> bytes:
     mtype, fmt, _cols = FORMATS[name]
-    scaled = [round(v * _MULT[c]) if c in _MULT else v for c, v in zip(fmt, values)]
+    scaled = [round(v * _MULT[c]) if c in _MULT else v for c, v in zip(fmt, values, strict=True)]
     return HEAD + bytes((mtype,)) + struct.pack("<" + "".join(_STRUCT[c] for c in fmt), *scaled)
 
 
@@ -299,7 +299,8 @@ def test_analyse_gives_the_same_estimates_from_a_dataflash_log_and_a_tlog(tmp_pa
         ),
         (
             ["analyse", "{bin}", "--plant", "paper-continuous", "--gains", "{gains}", "--signals", "{ctun}"],
-            "missing signals: alpha (CTUN.Pitch): the log has no CTUN; what the log has instead: angle of attack: AOA 49",
+            "missing signals: alpha (CTUN.Pitch): the log has no CTUN; "
+            "what the log has instead: angle of attack: AOA 49",
         ),
         (
             ["identify", "{bin}", "--out", "{work}/p.toml"],

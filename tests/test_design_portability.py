@@ -85,7 +85,7 @@ def test_every_demo_design_on_presets_perturbed_at_1e_9_in_reverse_order():
         v = verify_gains(plant, result.gains, result.certificate, result.gamma_e, result.gamma_z)
         assert v.stable and v.certificate_valid is True
     # and it is the same design as on the exact preset, to the solver's accuracy: the data moved by 1e-9
-    for plant, preset in zip(plants, reversed(PRESETS)):
+    for plant, preset in zip(plants, reversed(PRESETS), strict=True):
         perturbed_K1 = next(r for s, m, r in results if s == plant.source and m == "certified").gains.K1
         exact_K1 = designed(preset, "certified")[1].gains.K1  # the session's design of the exact preset
         assert np.allclose(perturbed_K1, exact_K1, rtol=1e-4, atol=1e-6), preset

@@ -96,7 +96,7 @@ def test_mavlink1_and_2_mixed_on_a_stream_split_anywhere(seed: int) -> None:
     data = b"".join(f for k in range(10) for f in (*_telemetry(vehicle, k), *_telemetry_v1(k, sysid=5)))
     rng = random.Random(seed)
     cuts = sorted(rng.sample(range(1, len(data)), 150))
-    pieces = [data[a:b] for a, b in zip([0, *cuts], [*cuts, len(data)])]
+    pieces = [data[a:b] for a, b in zip([0, *cuts], [*cuts, len(data)], strict=True)]
     c = FrameCounters()
     parser = FrameParser(c, stream=True)
     got = [f for piece in pieces for f in parser.feed(piece)]
@@ -137,7 +137,7 @@ def test_stream_split_anywhere_keeps_partial_frames(seed: int) -> None:
     data = b"".join(f for k in range(20) for f in _telemetry(vehicle, k))
     rng = random.Random(seed)
     cuts = sorted(rng.sample(range(1, len(data)), 150))
-    pieces = [data[a:b] for a, b in zip([0, *cuts], [*cuts, len(data)])]
+    pieces = [data[a:b] for a, b in zip([0, *cuts], [*cuts, len(data)], strict=True)]
     parser = FrameParser(FrameCounters(), stream=True)
     got = [f for piece in pieces for f in parser.feed(piece)]
     assert _decoded(got) == _reference([data])

@@ -100,7 +100,7 @@ def test_a_recorder_with_only_a_live_viewer_never_waits_for_it() -> None:
     samples, truth = make_run(2, n=300)
     rec = RrdRecorder(None, live=[f"rerun+http://127.0.0.1:{free_tcp_port()}/proxy"])
     t0 = time.monotonic()
-    for s, t in zip(samples, truth):
+    for s, t in zip(samples, truth, strict=True):
         rec.submit(s)
         rec.submit_truth(t)
     rec.close()

@@ -68,7 +68,7 @@ def test_the_switched_model_is_what_the_estimator_and_the_plant_do():
     modes = loss_modes(plant, gains)
     ks = sorted(measured)
     checked = 0
-    for k_prev, k_next in zip(ks, ks[1:]):
+    for k_prev, k_next in zip(ks, ks[1:], strict=False):
         xi = measured[k_prev]
         for k in range(k_prev, k_next):
             if events[k] == DELIVERED:

@@ -39,7 +39,7 @@ def step_exact(A_c, B_c, x, pieces, h, w=None):
     n = A_c.shape[0]
     bounds = [s for s, _ in pieces] + [h]
     held = np.zeros(n) if w is None else np.asarray(w, dtype=float)
-    for (start, u), end in zip(pieces, bounds[1:]):
+    for (start, u), end in zip(pieces, bounds[1:], strict=True):
         block = np.zeros((n + 1, n + 1))
         block[:n, :n] = A_c
         block[:n, n:] = B_c @ np.atleast_1d(u).reshape(-1, 1) + held.reshape(-1, 1)

@@ -35,7 +35,7 @@ def test_hinf_norms_agree_with_a_per_frequency_evaluation_also_perturbed():
     for A, B, outputs in _systems(rng):
         fast = hinf_norms(A, B, outputs)
         shaken = hinf_norms(A * (1 + 1e-9 * rng.standard_normal(A.shape)), B, outputs)
-        for C, value, value_shaken in zip(outputs, fast, shaken):
+        for C, value, value_shaken in zip(outputs, fast, shaken, strict=True):
             reference = _reference(A, B, C)
             # the refined peak is at least the dense grid's and within its resolution above it
             assert reference * (1 - 1e-9) <= value <= reference * (1 + 1e-3), (value, reference)

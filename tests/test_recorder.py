@@ -39,12 +39,12 @@ def test_every_sample_and_truth_row_comes_back(tmp_path: Path) -> None:
     assert set(recording.vehicles) == {1, 2}
     for sysid, (samples, truths) in runs.items():
         got = recording.vehicles[sysid]
-        assert len(samples) == 198 and len(got.samples) == len(samples)  # zip below stops at the shorter
+        assert len(samples) == 198 and len(got.samples) == len(samples)  # the strict zip below checks it too
         assert [r.k for r in got.samples] == [r.k for r in samples]
-        for g, w in zip(got.samples, samples):
+        for g, w in zip(got.samples, samples, strict=True):
             assert_same(g, w)
         assert len(truths) == 200 and len(got.truth) == len(truths)
-        for g, w in zip(got.truth, truths):
+        for g, w in zip(got.truth, truths, strict=True):
             assert_same(g, w)
     props = recording.properties
     assert props["plant"] == "paper" and props["plant_hash"] == "abc123" and props["layout"] == "1"
@@ -168,8 +168,8 @@ def test_numpy_fields_from_the_estimator_are_accepted(tmp_path: Path) -> None:
     recording = load_recording(path)
     assert set(recording.vehicles) == {4}
     got_samples = recording.vehicles[4].samples
-    assert len(samples) == 10 and len(got_samples) == len(samples)  # zip below stops at the shorter
-    for got, want in zip(got_samples, samples):
+    assert len(samples) == 10 and len(got_samples) == len(samples)  # the strict zip below checks it too
+    for got, want in zip(got_samples, samples, strict=True):
         assert_same(got, want)
 
 

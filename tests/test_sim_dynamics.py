@@ -20,12 +20,14 @@ MODEL = PLANT.continuous
 TOL = dict(rtol=1e-11, atol=1e-13, method="DOP853")
 
 
-def brute(x0, pieces, w=np.zeros(2)):
-    """Integrate x' = A x + B u(t) + w through ``pieces`` = [(t0, t1, u(t)), ...]."""
+def brute(x0, pieces, w=None):
+    """Integrate x' = A x + B u(t) + w through ``pieces`` = [(t0, t1, u(t)), ...] (``w``: zero by default)."""
     x = np.asarray(x0, float)
     B = MODEL.B_c[:, 0]
+    w = np.zeros(2) if w is None else w
     for t0, t1, u in pieces:
-        sol = solve_ivp(lambda t, z: MODEL.A_c @ z + B * u(t) + w, (t0, t1), x, **TOL)
+        # solve_ivp calls the right-hand side only within this iteration; u is bound explicitly all the same
+        sol = solve_ivp(lambda t, z, u=u: MODEL.A_c @ z + B * u(t) + w, (t0, t1), x, **TOL)
         x = sol.y[:, -1]
     return x
 

@@ -343,7 +343,7 @@ def _best_first_bound(
         _, _, s, r, depth = heapq.heappop(heap)
         s_child = s + float(np.abs(r @ B).sum())
         rows = np.einsum("a,vab->vb", r, A)
-        for row, value in zip(rows, s_child + gamma * dual_norms(rows, R)):
+        for row, value in zip(rows, s_child + gamma * dual_norms(rows, R), strict=True):
             heapq.heappush(heap, (-float(value), counter, s_child, row, depth + 1))
             counter += 1
     return -heap[0][0], min(node[4] for node in heap)

@@ -72,8 +72,8 @@ def register(subparsers) -> None:
         metavar="LEVEL",
         choices=TURBULENCE_LEVELS,
         help="the turbulence the flight met "
-        f"({', '.join(TURBULENCE_LEVELS)}), written beside the gust measured from the log ([disturbance]); information for "
-        "detectability, which scales the gust to other levels",
+        f"({', '.join(TURBULENCE_LEVELS)}), written beside the gust measured from the log ([disturbance]); "
+        "information for detectability, which scales the gust to other levels",
     )
     p.add_argument(
         "--air-only",
@@ -143,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _format(result, path: str, sysid: int, model: str, units: tuple[str, ...]) -> str:
     ex = result.excitation
-    unit_of = dict(zip(result.state_names, units))
+    unit_of = dict(zip(result.state_names, units, strict=True))
     unit_of.update({name: "deg" for name in result.input_names})
     op = ", ".join(
         f"{name} {value:.4f} {unit_of.get(name, '')}".rstrip() for name, value in result.operating_point.items()

@@ -43,7 +43,10 @@ _PROOFS = {
 
 def _other(bound) -> str:
     """The per-unit figures the chosen proof beat (the invariant ellipsoid alone is the loosest)."""
-    fmt = lambda x: "none" if x is None else f"{x:.6g}"
+
+    def fmt(x: float | None) -> str:
+        return "none" if x is None else f"{x:.6g}"
+
     return (
         f"paths {fmt(bound.bound_paths)} (followed exactly >= {bound.path_depth} samples), blocks "
         f"{fmt(bound.bound_blocks)} ({bound.head_terms} terms exact), ellipsoid alone {fmt(bound.ellipsoid)}"

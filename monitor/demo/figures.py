@@ -196,7 +196,7 @@ def write_figures(
         plt.close(fig)
         paths.append(path)
     fig, axes = plt.subplots(len(panels), 1, figsize=(10, 10), dpi=100, sharex=True)
-    for i, (ax, panel) in enumerate(zip(axes, panels)):
+    for i, (ax, panel) in enumerate(zip(axes, panels, strict=True)):
         _panel(
             ax,
             runs,
@@ -239,9 +239,9 @@ def write_identification_figure(
 
     states = list(dict.fromkeys(s for model in names.values() for s in model))
     fig, axes = plt.subplots(len(states), 1, figsize=(10, 2.4 * len(states)), dpi=100, sharex=True, squeeze=False)
-    for ax, state in zip(axes[:, 0], states):
+    for ax, state in zip(axes[:, 0], states, strict=True):
         drawn = False
-        for i, (model, run) in enumerate(runs.items()):
+        for model, run in runs.items():
             if state not in names[model]:
                 continue
             j = names[model].index(state)

@@ -186,5 +186,9 @@ def format_table(rows: list[Row], late_s: float = 30.0) -> str:
     # a failed row's reason spans the measurement columns, so it widens none of them (only its name counts)
     named = 2 if aircraft else 1
     widths = [max([len(h), *(len(b[i]) for b in body if len(b) == len(head) or i < named)]) for i, h in enumerate(head)]
-    line = lambda cells: "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()  # noqa: E731
+
+    def line(cells: list[str]) -> str:
+        # strict=False: a failed row has fewer cells than columns (its reason is its last cell)
+        return "  ".join(c.ljust(w) for c, w in zip(cells, widths, strict=False)).rstrip()
+
     return "\n".join([line(head), line(["-" * w for w in widths]), *(line(b) for b in body)])

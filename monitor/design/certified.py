@@ -88,7 +88,7 @@ class ObserverLMI:
         loop0 = closed_loop(plant, Gains.zero(plant), nominal_point(plant), steady=(np.zeros((n, q)), np.zeros((m, q))))
         constraints = []  # P, Q > 0 follow from the -P, -Q diagonal blocks
         correction = self._E_o @ self.W @ C_o  # G^T (A_K - E_o [L; M] C_o) = G^T A_K - E_o W C_o
-        for A_i, B_i in zip(self.A_params, self.B_params):
+        for A_i, B_i in zip(self.A_params, self.B_params, strict=True):
             GA = G.T @ A_i - correction
             GB = G.T @ B_i
             for X, C_out, g in ((self.P, loop0.C_ef, self.g_e), (self.Q, loop0.C_y, self.g_z)):
@@ -104,7 +104,7 @@ class ObserverLMI:
             steady = steady_state(plant, zero_obs)
         except ValueError:
             return None
-        for v, A_p, B_p in zip(self.vertices, self.A_params, self.B_params):
+        for v, A_p, B_p in zip(self.vertices, self.A_params, self.B_params, strict=True):
             loop = closed_loop(plant, zero_obs, v, steady=steady)
             A_p.value = loop.A
             B_p.value = loop.B

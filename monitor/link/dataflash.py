@@ -98,8 +98,8 @@ class DataFlashLayouts(Layouts):
                 cols,
                 {c: i for i, c in enumerate(cols)},
                 {c: 1 for c in cols},
-                {c: code in _TEXT_CODES for c, code in zip(cols, codes)},
-                dict(zip(cols, codes)),
+                {c: code in _TEXT_CODES for c, code in zip(cols, codes, strict=True)},
+                dict(zip(cols, codes, strict=True)),
                 _TIME_NAMES,
             )
         return layout

@@ -88,7 +88,7 @@ def _build(cls) -> MessageLayout:
     is_text: dict[str, bool] = {}
     codes: dict[str, str] = {}
     flat = 0
-    for name, (count, code) in zip(cls.ordered_fieldnames, tokens):
+    for name, (count, code) in zip(cls.ordered_fieldnames, tokens, strict=True):
         text = code == "s"
         n = 1 if text else int(count or 1)
         offsets[name], lengths[name], is_text[name], codes[name] = flat, n, text, code

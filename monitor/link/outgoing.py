@@ -56,7 +56,7 @@ _HEARTBEAT_VALUES = (
 def command_frame(enc: FrameEncoder, cmd: CommandMap, sysid: int, time_usec: int, u) -> bytes:
     """The command for ``sysid`` answering the instant ``time_usec``; ``u`` in plant units, already saturated."""
     controls = [0.0] * 8
-    for channel, scale, value in zip(cmd.channels, cmd.full_scale, u):
+    for channel, scale, value in zip(cmd.channels, cmd.full_scale, u, strict=True):
         controls[channel] = _f32(float(value) / scale)
     return enc.encode(_COMMAND, (time_usec, *controls, cmd.group, sysid, VEHICLE_COMPONENT))
 

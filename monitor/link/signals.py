@@ -203,13 +203,13 @@ class SignalMap:
 
     def deviations(self, values: dict[str, float]) -> tuple[list[float], list[float] | None]:
         """``y - y0`` and ``u - u0`` (None when the sample has no complete actuator report) for the estimator."""
-        y = [values[name] - y0 for name, y0 in zip(self.outputs, self.y0)]
-        report = [values[name] - u0 for name, u0 in zip(self.actuator, self.u0) if name in values]
+        y = [values[name] - y0 for name, y0 in zip(self.outputs, self.y0, strict=True)]
+        report = [values[name] - u0 for name, u0 in zip(self.actuator, self.u0, strict=True) if name in values]
         return y, (report if len(report) == len(self.actuator) else None)
 
     def absolute(self, u) -> list[float]:
         """A command in deviation coordinates as the absolute deflection that goes on the wire, ``u0 + u``."""
-        return [u0 + float(v) for u0, v in zip(self.u0, u)]
+        return [u0 + float(v) for u0, v in zip(self.u0, u, strict=True)]
 
     def describe_operating_point(self) -> str | None:
         """``operating point alpha 2.31 deg, ..., elevator -4.3 deg`` (None when the map has none)."""

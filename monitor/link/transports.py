@@ -296,7 +296,8 @@ class _Connection(asyncio.Protocol):
 
     def connection_made(self, transport) -> None:
         self.transport = transport
-        self.peer = "%s:%s" % tuple(transport.get_extra_info("peername")[:2])
+        host, port = transport.get_extra_info("peername")[:2]
+        self.peer = f"{host}:{port}"
         self.link.connections.add(self)
         log.info("%s: connected to %s", self.link.spec, self.peer)
 

@@ -62,7 +62,8 @@ def _E(plant: Plant) -> np.ndarray:
 
 @lru_cache(maxsize=32)
 def lag_curve(base: Plant) -> Callable[[float], np.ndarray]:
-    """``a -> G(a)`` for ``a`` in ``[0, h]`` (``monitor.model.long_delay.curve_of``) of the exact or reconstructed model."""
+    """``a -> G(a)`` for ``a`` in ``[0, h]`` (``monitor.model.long_delay.curve_of``) of the exact or
+    reconstructed model."""
     model = curve_model(base)
     return curve_of(model.A_c, model.B_c, base.h)
 
@@ -198,7 +199,7 @@ def _oriented_box(cloud: np.ndarray) -> np.ndarray:
     dim = cloud.shape[1]
     if dim > 10:
         return cloud
-    corners = np.array(np.meshgrid(*[(a, b) for a, b in zip(lo, hi)], indexing="ij")).reshape(dim, -1).T
+    corners = np.array(np.meshgrid(*[(a, b) for a, b in zip(lo, hi, strict=True)], indexing="ij")).reshape(dim, -1).T
     box: np.ndarray = centre + corners @ axes
     return box
 
@@ -220,7 +221,7 @@ def _oriented_prism(cloud: np.ndarray) -> np.ndarray:
         return cloud
     width = hi[1:] - lo[1:]
     # the thin simplex {y >= lo, sum_j (y_j - lo_j) / w_j <= dim - 1} holds the thin box
-    thin = [lo[1:]] + [lo[1:] + (dim - 1) * w * e for w, e in zip(width, np.eye(dim - 1))]
+    thin = [lo[1:]] + [lo[1:] + (dim - 1) * w * e for w, e in zip(width, np.eye(dim - 1), strict=True)]
     corners = np.array([np.concatenate([[end], t]) for end in (lo[0], hi[0]) for t in thin])
     return np.unique(centre + corners @ axes, axis=0)
 

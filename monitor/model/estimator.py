@@ -214,7 +214,7 @@ class Estimator:
         if self._keep:
             keep = self._keep
             previous = s.f_reported if s.f_reported is not None and not reset else [0.0] * len(f_hat)
-            f_hat = s.f_reported = [keep * p + (1.0 - keep) * f for p, f in zip(previous, f_hat)]
+            f_hat = s.f_reported = [keep * p + (1.0 - keep) * f for p, f in zip(previous, f_hat, strict=True)]
         return StepResult(
             k=k,
             u=np.array(u),
@@ -242,7 +242,7 @@ class Estimator:
         u = [sum(map(mul, row, v)) for row in self._U_rows]
         bounds = self._bounds
         if bounds is not None:
-            u = [hi if e > hi else lo if e < lo else e for e, (lo, hi) in zip(u, bounds)]
+            u = [hi if e > hi else lo if e < lo else e for e, (lo, hi) in zip(u, bounds, strict=True)]
         return self._finish(s, k, v, u)
 
     def observe(

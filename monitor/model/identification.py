@@ -554,8 +554,8 @@ def identify(data: FlightData, holdout: float = HOLDOUT) -> Identification:
     fit_e = nrmse_fit(ye, ye_hat)
     if not np.all(np.isfinite(yv_hat)):
         notes.append("the model diverges in the free run over the held-out data")
-    op = {name: float(v) for name, v in zip(names, op_x)}
-    op.update({name: float(v) for name, v in zip(inputs, op_u)})
+    op = {name: float(v) for name, v in zip(names, op_x, strict=True)}
+    op.update({name: float(v) for name, v in zip(inputs, op_u, strict=True)})
     return Identification(
         h=h,
         state_names=names,
@@ -566,8 +566,8 @@ def identify(data: FlightData, holdout: float = HOLDOUT) -> Identification:
         B_d=B_d,
         A_c=A_c,
         B_c=B_c,
-        fit_validation={name: float(f) for name, f in zip(names, fit_v)},
-        fit_estimation={name: float(f) for name, f in zip(names, fit_e)},
+        fit_validation={name: float(f) for name, f in zip(names, fit_v, strict=True)},
+        fit_estimation={name: float(f) for name, f in zip(names, fit_e, strict=True)},
         modes=modes_of(A_c),
         samples=len(k),
         samples_estimation=len(pairs),

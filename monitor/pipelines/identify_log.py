@@ -356,7 +356,7 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
     header = [
         f"Identified by fault-monitor identify from {Path(req.log).name} (sysid {sysid}), model {req.model}.",
         "States are deviations from [signals] operating_point, in "
-        + ", ".join(f"{s_} {u}".rstrip() for s_, u in zip(states, units))
+        + ", ".join(f"{s_} {u}".rstrip() for s_, u in zip(states, units, strict=True))
         + f"; input: {actuator} deg.",
         "D_cf = B_c (an elevator fault); D_cd = the alpha column of A_c (a vertical gust as an alpha "
         "disturbance, deg).",

@@ -65,7 +65,7 @@ def load_model(
     signals = signals_for_plant(plant, signals_file, layouts)
     limit = plant.actuator.limit
     if limit is not None:
-        for name, u0 in zip(signals.actuator, signals.u0):
+        for name, u0 in zip(signals.actuator, signals.u0, strict=True):
             if not abs(u0) < limit:
                 raise UserError(
                     f"{signals.source}: [signals] operating_point: '{name}' = {u0:g} is not inside the "

@@ -192,9 +192,9 @@ def _assemble(cls: type, sysid: int, columns: list[_Column]) -> list[Any]:
         if name == "alarm":
             per_row[name] = (has & (values >= 0.5)).tolist()
         elif name == "run":
-            per_row[name] = [int(v) if h else 0 for v, h in zip(values.tolist(), has.tolist())]
+            per_row[name] = [int(v) if h else 0 for v, h in zip(values.tolist(), has.tolist(), strict=True)]
         elif name in _OPTIONAL:
-            per_row[name] = [v if h else None for v, h in zip(values.tolist(), has.tolist())]
+            per_row[name] = [v if h else None for v, h in zip(values.tolist(), has.tolist(), strict=True)]
         else:
             per_row[name] = values.tolist()
     for name, comps in vectors.items():
@@ -207,7 +207,7 @@ def _assemble(cls: type, sysid: int, columns: list[_Column]) -> list[Any]:
     for name in order:
         if name not in per_row:
             per_row[name] = _absent(name, n)
-    return [cls(*row) for row in zip(*(per_row[name] for name in order))]
+    return [cls(*row) for row in zip(*(per_row[name] for name in order), strict=True)]
 
 
 def _absent(name: str, n: int) -> list[Any]:

@@ -9,6 +9,7 @@ properties) is documented in ``monitor.service.recorder`` and ``RECORDING.md``.
 from __future__ import annotations
 
 import collections
+import functools
 import json
 import logging
 import math
@@ -158,7 +159,7 @@ def _columns(
     everyone = np.ones(n, bool)
     names = [*scalars, *vectors]
     rows = map(operator.attrgetter(*names), records)
-    fields = dict(zip(names, zip(*rows))) if n else dict.fromkeys(names, ())
+    fields = dict(zip(names, zip(*rows, strict=True), strict=True)) if n else dict.fromkeys(names, ())
     for field, (path, scale) in scalars.items():
         raw = fields[field]
         if None not in raw:
@@ -338,7 +339,8 @@ class StreamWriter:
 
     def _write(self, records: list, scalars: dict[str, tuple[str, float]], vectors: dict[str, str], wall: bool) -> None:
         for sysid, recs in _by_sysid(records).items():
-            ok = self._guard("write", lambda: self._write_vehicle(sysid, recs, scalars, vectors, wall))
+            # called at once, in this iteration; bound explicitly all the same
+            ok = self._guard("write", functools.partial(self._write_vehicle, sysid, recs, scalars, vectors, wall))
             self.stats["written" if ok else "failed"] += len(recs)
             if ok:
                 self._sysids.add(sysid)

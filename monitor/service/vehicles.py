@@ -384,7 +384,8 @@ class VehicleTable:
         if vehicle.last_command is None or vehicle.last_command_k is None or vehicle.last_command_k >= k:
             return None  # samples lost since the last command do not matter: no command was sent for them
         applied = all(
-            abs(r - c) <= APPLIED_TOLERANCE * max(1.0, abs(c)) for r, c in zip(reported, vehicle.last_command)
+            abs(r - c) <= APPLIED_TOLERANCE * max(1.0, abs(c))
+            for r, c in zip(reported, vehicle.last_command, strict=True)
         )
         vehicle.applied.append(applied)
         if not applied:

@@ -85,7 +85,7 @@ class AircraftPeer(PeerVehicle):
         # the assembler's view: the sample goes once ATTITUDE and AOA_SSA are in, an airspeed is held, and its
         # report is in (once the vehicle is known to report); the airspeed is the newest held at that moment
         sent: set[str] = set()
-        for name, msg in msgs:
+        for name, _msg in msgs:
             if name == "VFR_HUD":
                 self.held = f32(v)
             else:

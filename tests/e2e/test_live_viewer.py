@@ -48,7 +48,7 @@ def test_the_viewer_and_the_file_get_every_sample(tmp_path: Path, gains_file: Pa
     file_ks = [s.k for s in recording.vehicles[1].samples]
     assert file_ks == list(range(60)) == [s.k for s in live.vehicles[1].samples]
     assert len(live.vehicles[1].truth) == len(recording.vehicles[1].truth) >= 55
-    for mine, theirs in zip(recording.vehicles[1].samples, live.vehicles[1].samples):
+    for mine, theirs in zip(recording.vehicles[1].samples, live.vehicles[1].samples, strict=True):
         assert mine.f_hat == theirs.f_hat and mine.u == theirs.u
     assert live.properties == recording.properties and live.properties["layout"] == "1"
     assert RrdReader(seen).blueprints(), "the viewer got no blueprint"

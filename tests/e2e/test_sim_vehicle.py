@@ -92,14 +92,14 @@ def test_plain_pymavlink_client_reads_the_vehicle_and_closes_the_loop(tmp_path):
     truth = read_jsonl(tmp_path / "truth.jsonl")
     assert [t["k"] for t in truth] == list(range(30)) and all(t["status"] == "applied" for t in truth)
     # units on the wire: AOA in degrees, pitch rate in rad/s, elevator in degrees
-    for att, aoa, act, t in zip(seen["ATTITUDE"], seen["AOA_SSA"], seen["ACTUATOR_OUTPUT_STATUS"], truth):
+    for att, aoa, act, t in zip(seen["ATTITUDE"], seen["AOA_SSA"], seen["ACTUATOR_OUTPUT_STATUS"], truth, strict=True):
         assert aoa.AOA == pytest.approx(t["x"][0], abs=1e-5)
         assert att.pitchspeed == pytest.approx(math.radians(t["x"][1]), abs=1e-6)
         assert act.actuator[0] == pytest.approx(t["elevator"], abs=1e-5) and act.time_usec == aoa.time_usec
     # the plant physics: model (2) with the true tau(k) and the commands the controller sent
     x = np.array(truth[0]["x"])
     u_prev = 0.0
-    for row, nxt in zip(truth, truth[1:]):
+    for row, nxt in zip(truth, truth[1:], strict=False):
         u = row["u"][0]
         assert u == pytest.approx(-gain * row["x"][0], abs=1e-5)
         D = discretize(PLANT.continuous, PLANT.h, row["tau"])

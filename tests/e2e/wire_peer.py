@@ -166,7 +166,7 @@ def fly_tcp_stream(peer: PeerVehicle, conn: socket.socket, steps: int, wait_s: f
         for k in range(peer.k_next, peer.k_next + steps):
             data = b"".join(peer.frames(k))
             cuts = sorted(peer.rng.sample(range(1, len(data)), 6))
-            for a, b in zip([0, *cuts], [*cuts, len(data)]):
+            for a, b in zip([0, *cuts], [*cuts, len(data)], strict=True):
                 conn.sendall(data[a:b])
                 time.sleep(0.001)  # separate reads on the other side, splitting frames for real
             _await(lambda: conn.recv(65535), peer, k, wait_s)
