@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from monitor.cli import main
+from monitor.errors import UserError
 from tests.dataflash_formats import FORMATS
 
 HEAD = b"\xa3\x95"
@@ -370,3 +371,24 @@ def test_a_damaged_dataflash_log_gives_its_good_records_and_one_warning(flight, 
     assert code == 0 and len(flight["samples"]) - 6 <= report["samples"]["log"] < len(flight["samples"])
     warnings = [r.message for r in caplog.records if "DataFlash reader" in r.message]
     assert len(warnings) == 1 and "Skipped" in warnings[0] and "bad header" not in captured.err, warnings
+
+
+def test_a_format_record_naming_fewer_columns_than_fields_is_a_one_line_error(tmp_path: Path) -> None:
+    """pymavlink reads an FMT whose column names are fewer than its fields; its values could not be named."""
+    from monitor.link.dataflash import open_dataflash
+
+    corrupt = dict(FORMATS, AOA=(131, "Qff", "TimeUS,AOA"))
+    path = tmp_path / "corrupt.bin"
+    with open(path, "wb") as fh:
+        fh.write(_fmt_fmt())
+        for name in ("AOA", "RCOU"):
+            mtype, fmt, cols = corrupt[name]
+            length = 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in fmt))
+            fh.write(
+                HEAD + b"\x80" + struct.pack("<BB4s16s64s", mtype, length, name.encode(), fmt.encode(), cols.encode())
+            )
+        fh.write(_pack("AOA", [T0_US, 1.0, 0.0]) + _pack("RCOU", [T0_US, 1500, 1500, 1200, 1500] + [0] * 10))
+    dlog = open_dataflash(path)
+    with pytest.raises(UserError, match=r"FMT record of AOA declares 3 fields but names 2 columns \(a corrupt log\)"):
+        dlog.layouts("AOA")
+    assert dlog.layouts("RCOU") is not None  # the sound messages of the log stay readable

@@ -90,6 +90,11 @@ class DataFlashLayouts(Layouts):
                 return None
             cols = tuple(fmt.columns)
             codes = [chr(c) if isinstance(c, int) else c for c in fmt.msg_fmts]
+            if len(codes) != len(cols):  # pymavlink reads such a record; its values could not be named
+                raise UserError(
+                    f"DataFlash log: the FMT record of {name} declares {len(codes)} fields but names {len(cols)}"
+                    " columns (a corrupt log)"
+                )
             layout = self._cache[name] = MessageLayout(
                 self._ids.get(name, 0),
                 name,
