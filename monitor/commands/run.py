@@ -212,6 +212,15 @@ def register(subparsers) -> None:
         "the u(k) the vehicle reports in its actuator message",
     )
     link.add_argument(
+        "--compensate",
+        action="store_true",
+        help="the vehicle's own autopilot flies and the monitor compensates: run the observer with the deflection "
+        "the vehicle reports (as --observe) and answer each sample with the fault compensation alone (the "
+        "deflection that cancels the estimated fault: -f_hat for an elevator bias), which the vehicle adds to its "
+        "autopilot's deflection (sim-vehicle run --compensation). The estimator's error dynamics are certified; "
+        "the loop with an autopilot the design never saw is not",
+    )
+    link.add_argument(
         "--no-gcs-feedback",
         dest="gcs_feedback",
         action="store_false",
@@ -303,6 +312,8 @@ def run(args: argparse.Namespace) -> int:
     from monitor.service.daemon import MonitorConfig, default_name, run_daemon
     from monitor.wire.zenoh_session import config_from_args
 
+    if args.observe and args.compensate:
+        raise UserError("--observe sends nothing and --compensate sends the compensation: choose one")
     if not args.vehicle_timeout > 0:
         raise UserError("--vehicle-timeout must be positive")
     if args.queue < 1:
@@ -312,6 +323,11 @@ def run(args: argparse.Namespace) -> int:
     connections = [parse_connection(c) for c in (args.mavlink or ["udpin:127.0.0.1:14550"])]
     live_urls, viewer = _live_viewers(args)
     fleet = load_models(args)
+    if args.compensate and any(m.plant.lags is not None for m in fleet.models()):
+        raise UserError(
+            "--compensate needs delays shorter than a sample (the compensation's delay enters the model as "
+            "B0(tau), B1(tau)); this plant's tau_max is one sample or more"
+        )
     alarm = alarm_from_args(args, fleet)
     key = None
     if args.signing_key:
@@ -325,7 +341,7 @@ def run(args: argparse.Namespace) -> int:
         "monitor_version": __version__,
         "mavlink": " ".join(str(c) for c in connections),
         "key_prefix": args.key_prefix,
-        "mode": "observe" if args.observe else "control",
+        "mode": "compensate" if args.compensate else "observe" if args.observe else "control",
         "alarm": f"threshold={alarm.threshold} clear={alarm.clear} samples={alarm.samples}",
     }
     default = fleet.default
@@ -357,6 +373,7 @@ def run(args: argparse.Namespace) -> int:
         truth=args.truth,
         queue_max=args.queue,
         observe=args.observe,
+        compensate=args.compensate,
         gcs_feedback=args.gcs_feedback,
         assembly_wait=args.assembly_wait,
         zenoh_endpoints=endpoints,

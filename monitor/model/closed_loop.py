@@ -83,18 +83,30 @@ def steady_state(plant: Plant, gains: Gains) -> tuple[np.ndarray, np.ndarray]:
     return sol[:n], sol[n:]
 
 
-def fault_cancelling_K3(plant: Plant, K2: np.ndarray) -> np.ndarray:
-    """K3 such that a constant fault leaves no steady-state output (``C S_x = 0``), for any K1.
+def fault_compensation(plant: Plant) -> np.ndarray:
+    """The input per unit of a constant fault that leaves no steady-state output: ``u = G f`` with ``C S_x = 0``.
 
-    With ``y = 0`` in steady state, ``u = -(C (I-A)^-1 (B0+B1))^+ C (I-A)^-1 Df f`` and ``(I - K2) u = K3 f``.
-    The paper's ``K3 = -B0^+ Df`` relies on Lemma 3's rank condition, which fails for its own example.
+    With ``y = 0`` in steady state, ``u = -(C (I-A)^-1 (B0+B1))^+ C (I-A)^-1 Df f``. For an actuator fault
+    (``Df = B0 + B1``) this is ``-I``: the deflection that cancels the bias at the surface. It is what a monitor
+    that only compensates adds to another controller's deflection (``fault-monitor run --compensate``): any
+    controller that holds ``y = 0`` without a fault then holds it with one, the fault being cancelled where it
+    enters.
     """
     n = plant.n
     resolvent = np.linalg.solve(np.eye(n) - plant.A, np.hstack([plant.B0 + plant.B1, plant.Df]))
     G_u = plant.C @ resolvent[:, : plant.m]
     G_f = plant.C @ resolvent[:, plant.m :]
-    u_per_f = -np.linalg.pinv(G_u) @ G_f
-    K3: np.ndarray = (np.eye(plant.m) - K2) @ u_per_f
+    u_per_f: np.ndarray = -np.linalg.pinv(G_u) @ G_f
+    return u_per_f
+
+
+def fault_cancelling_K3(plant: Plant, K2: np.ndarray) -> np.ndarray:
+    """K3 such that a constant fault leaves no steady-state output (``C S_x = 0``), for any K1.
+
+    The steady-state input is ``fault_compensation(plant) f``, and eq. (6) gives ``(I - K2) u = K3 f``.
+    The paper's ``K3 = -B0^+ Df`` relies on Lemma 3's rank condition, which fails for its own example.
+    """
+    K3: np.ndarray = (np.eye(plant.m) - K2) @ fault_compensation(plant)
     return K3
 
 

@@ -24,9 +24,11 @@ later (README, the trade table).
 Which u(k-1): the contract says the deflection the vehicle *reports* at sample k (``u_prev``), because a
 command that was lost or late never acted; only when no report came does the estimator use its own
 last command. Observe-only (``observe``): the vehicle's own controller issued u(k), reported with the
-sample, and only eq. (5) runs. Past one sample (a lagged plant, ``monitor.model.long_delay``) the report at k
-is whichever command is in force, not u(k-1); the lagged model carries the commands in flight itself, so the
-estimator keeps its own last command and ignores the report (the certificate covers every arrival pattern).
+sample, and only eq. (5) runs. Compensation (``compensate``): the same, and a fault term alone, ``G f_hat(k)``,
+goes back for the vehicle to add to its own controller's deflection. Past one sample (a
+lagged plant, ``monitor.model.long_delay``) the report at k is whichever command is in force, not u(k-1); the
+lagged model carries the commands in flight itself, so the estimator keeps its own last command and ignores
+the report (the certificate covers every arrival pattern).
 Why saturate here: a command beyond the actuator's travel is not what acts on the plant, and an observer fed
 the unsaturated value would learn a fault that is not there.
 """
@@ -41,7 +43,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from monitor.model.closed_loop import Gains
+from monitor.model.closed_loop import Gains, fault_compensation
 from monitor.model.plant import Plant
 
 if TYPE_CHECKING:
@@ -138,6 +140,7 @@ class Estimator:
         self._m, self._N, self._nq = m, N, n + q
         self._n_reported = plant.physical.n  # x_hat as reported: the aircraft's state, not the commands in flight
         self._U_rows = self._U.tolist()
+        self._compensation_rows = fault_compensation(plant).tolist()
         self._skipped = 0
         self._O_rows = self._O.tolist()
         self._lim = float(self.u_limit) if self.u_limit is not None else None
@@ -251,3 +254,33 @@ class Estimator:
         """Observe-only: eq. (5) with the u(k) the vehicle's own controller issued (no command computed)."""
         v = self._advance(s, k, u_prev) + [float(e) for e in np.ravel(y)]
         return self._finish(s, k, v, [float(e) for e in np.ravel(u_now)])
+
+    def compensate(
+        self, s: EstimatorState, k: int, y: ArrayLike, u_total: ArrayLike, c_prev: Iterable[float]
+    ) -> tuple[StepResult, list[float]]:
+        """The autopilot flies, the monitor compensates: eq. (5), and the compensation ``c(k) = G f_hat(k)`` that
+        the vehicle adds to its autopilot's deflection after the link's delay. ``G`` is eq. (6)'s fault term for
+        a controller that is not ours (``closed_loop.fault_compensation``: the input that leaves no steady-state
+        output; ``-I`` for an actuator fault), not the design's K3, which assumes the design's ``K2 u(k-1)``.
+
+        ``u_total``: the deflection in force at instant k as the vehicle reports it, its autopilot's new
+        ``a(k)`` plus the compensation ``c(k-1)`` still in force; ``c_prev``: that ``c(k-1)``, as sent. Over
+        the interval the autopilot's part acts from k h and the compensation's from k h + tau, so
+
+            x+ = A x + (B0 + B1) a(k) + B0 c(k) + B1 c(k-1) = A x + B0 (a(k) + c(k)) + B1 (a(k) + c(k-1)),
+
+        which is eq. (5) with u(k-1) := u_total and u(k) := u_total - c(k-1) + c(k). Why the report and not
+        the autopilot's part alone: it is the deflection that acted, whoever commanded it; a compensation that
+        was lost (the vehicle still holds an older one) is then only wrong in the split, by c(k-1) - c(k-2).
+        The compensation uses the raw estimate (the loop's, not the low-passed reported one) and is limited to
+        the actuator's limit; the vehicle clips the total at the surface's travel.
+        """
+        total = [float(e) for e in np.ravel(u_total)]
+        v = self._advance(s, k, total) + [float(e) for e in np.ravel(y)]
+        f_raw = v[s.n : self._nq]
+        comp = [sum(map(mul, row, f_raw)) for row in self._compensation_rows]
+        lim = self._lim
+        if lim is not None:
+            comp = [lim if c > lim else -lim if c < -lim else c for c in comp]
+        u_now = [t - p + c for t, p, c in zip(total, c_prev, comp, strict=True)]
+        return self._finish(s, k, v, u_now), comp

@@ -59,6 +59,7 @@ class MonitorConfig:
     truth: bool = True
     queue_max: int = 10_000
     observe: bool = False
+    compensate: bool = False  # the vehicle's autopilot flies; the monitor sends the fault compensation alone
     gcs_feedback: bool = True
     assembly_wait: float = 0.02
     zenoh_endpoints: str = ""
@@ -69,7 +70,12 @@ class MonitorConfig:
 
 def build_pipeline(config: MonitorConfig, publisher=None, recorder=None) -> Pipeline:
     table = VehicleTable(
-        config.fleet, config.alarm, config.vehicle_timeout, observe=config.observe, wait_s=config.assembly_wait
+        config.fleet,
+        config.alarm,
+        config.vehicle_timeout,
+        observe=config.observe,
+        wait_s=config.assembly_wait,
+        compensate=config.compensate,
     )
     return Pipeline(table, gcs_feedback=config.gcs_feedback, publisher=publisher, recorder=recorder)
 
@@ -139,7 +145,7 @@ async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
             link = open_link(spec, i, pipeline.on_frames, pipeline.frames, signer)
             await link.start()
             links.append(link)
-        mode = "observe-only" if config.observe else "closed loop"
+        mode = "compensation only" if config.compensate else "observe-only" if config.observe else "closed loop"
         log.info(
             "ready: %s; MAVLink %s; Zenoh %s, key prefix '%s', name '%s'%s%s",
             mode,

@@ -68,7 +68,7 @@ class Pipeline:
         recorder=None,
     ) -> None:
         self.table = table
-        self.send_commands = send_commands and not table.observe
+        self.send_commands = send_commands and (table.compensate or not table.observe)
         self.gcs_feedback = gcs_feedback
         self.publisher = publisher
         self.recorder = recorder
@@ -153,8 +153,10 @@ class Pipeline:
             enc = link.encoder_for(peer)  # MAVLink 1 for a peer that speaks only v1
             out = b""
             if self.send_commands:
-                # the absolute deflection u0 + u(k) (the estimator's u is a deviation from the operating point)
-                out = command_frame(enc, vehicle.model.signals.command, vehicle.sysid, sample.time_usec, p.u_abs)
+                # the absolute deflection u0 + u(k) (the estimator's u is a deviation from the operating point);
+                # --compensate: the compensation alone, an increment the vehicle adds to its autopilot's deflection
+                sent = p.compensation if p.compensation is not None else p.u_abs
+                out = command_frame(enc, vehicle.model.signals.command, vehicle.sysid, sample.time_usec, sent)
                 self.commands_sent += 1
             if self.gcs_feedback:
                 out += fhat_frames(enc, sample.time_usec, r.f_hat)

@@ -65,6 +65,7 @@ class Vehicle:
         "skipped",
         "warned_missing",
         "last_command",
+        "last_compensation",
         "last_command_k",
         "no_report",
         "rejected",
@@ -103,6 +104,7 @@ class Vehicle:
         self.processed = self.skipped = self.no_report = self.rejected = self.not_applied = 0
         self.warned_missing = False
         self.last_command: list[float] | None = None
+        self.last_compensation: list[float] | None = None  # --compensate: c(k-1), the last compensation sent
         self.last_command_k: int | None = None
         self.last_reject_log = -1e9
         self.applied: deque[bool] = deque(maxlen=APPLIED_WINDOW)  # were the last commands seen to act?
@@ -135,7 +137,19 @@ class TableCounters:
 class Processed:
     """The outcome of one processed sample, for the reply, the publishers and the recorder."""
 
-    __slots__ = ("vehicle", "sample", "result", "t", "y", "tau_obs", "alarm_event", "f_mag", "command_applied", "u_abs")
+    __slots__ = (
+        "vehicle",
+        "sample",
+        "result",
+        "t",
+        "y",
+        "tau_obs",
+        "alarm_event",
+        "f_mag",
+        "command_applied",
+        "u_abs",
+        "compensation",
+    )
 
     def __init__(
         self,
@@ -161,6 +175,7 @@ class Processed:
         self.command_applied = command_applied  # did the previous command act (None: cannot tell)?
         # the absolute deflection u0 + u(k): what goes on the wire (observe-only: what the vehicle reported)
         self.u_abs = u_abs if u_abs is not None else result.u.tolist()
+        self.compensation: list[float] | None = None  # --compensate: what is sent (K3 f_hat), added on board
 
 
 class VehicleTable:
@@ -174,12 +189,17 @@ class VehicleTable:
         restart_silence: float = 1.0,
         observe: bool = False,
         wait_s: float = 0.02,
+        compensate: bool = False,
     ) -> None:
+        """``observe``: the vehicle's own controller flies, nothing is sent. ``compensate``: it flies too, and
+        each sample is answered with the fault compensation ``K3 f_hat`` alone, which the vehicle adds to its
+        controller's deflection; the estimator runs as observe-only (it needs the reported deflection)."""
         self.fleet = fleet
         self.alarm = alarm
         self.timeout = timeout
         self.restart_silence = min(restart_silence, timeout)
-        self.observe = observe
+        self.compensate = compensate
+        self.observe = observe or compensate
         self.wait_s = wait_s
         self.vehicles: dict[int, Vehicle] = {}
         self.counters = TableCounters()
@@ -344,10 +364,16 @@ class VehicleTable:
         y, u_report = sig.deviations(values)
         est = model.estimator
         applied = None
+        compensation: list[float] | None = None
         if self.observe:
             # u(k) issued by the vehicle is in this sample's report; u(k-1) stays from the previous one
             assert u_report is not None  # observe mode: a sample is complete only with its actuator report
-            result = est.observe(vehicle.state, sample.k, y, u_report)
+            if self.compensate:
+                c_prev = vehicle.last_compensation or [0.0] * len(u_report)
+                result, compensation = est.compensate(vehicle.state, sample.k, y, u_report, c_prev)
+                vehicle.last_compensation = compensation
+            else:
+                result = est.observe(vehicle.state, sample.k, y, u_report)
             u_abs = [values[name] for name in sig.actuator]
         else:
             if u_report is None:
@@ -377,7 +403,9 @@ class VehicleTable:
         f_mag = max(abs(float(f)) for f in result.f_hat)
         event = vehicle.alarm.update(f_mag)
         tau_obs = vehicle.delay.update(t, wall)
-        return Processed(vehicle, sample, result, t, y, tau_obs, event, f_mag, applied, u_abs)
+        processed = Processed(vehicle, sample, result, t, y, tau_obs, event, f_mag, applied, u_abs)
+        processed.compensation = compensation
+        return processed
 
     def _judge_applied(self, vehicle: Vehicle, k: int, reported: list[float]) -> bool | None:
         """Did the last command (for k-1, or earlier when samples were lost since) act? The report at k says so."""

@@ -1,0 +1,84 @@
+"""The autopilot flies, the monitor compensates (``fault-monitor run --compensate``): the estimator's step.
+
+The plant is integrated here with its own discrete matrices; a vehicle autopilot ``a(k) = K_ap y(k)`` (not the
+design's controller) acts from the sampling instant, and the compensation ``c(k)`` the monitor returns acts
+after the link's delay, from ``k h + tau``: ``x+ = A x + (B0 + B1) a(k) + B0 c(k) + B1 c(k-1) + Df f``. The
+monitor sees only what the vehicle reports, the deflection in force at each instant ``a(k) + c(k-1)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from monitor.model.closed_loop import fault_compensation
+from monitor.model.estimator import Estimator
+from tests.designs import designed
+
+K_AP = -0.2  # the vehicle's own autopilot (any stabilising gain: the paper's plant is open-loop stable)
+ONSET, BIAS, STEPS = 20, 2.0, 60
+
+
+def _fly(compensate: bool):
+    plant, result = designed("paper-continuous", "certified")
+    g = result.gains
+    est = Estimator(plant, g)
+    s = est.initial_state()
+    A, B0, B1, C, Df = plant.A, plant.B0, plant.B1, plant.C, plant.Df
+    x = np.zeros(plant.n)
+    c_prev = [0.0]
+    # an independent observer, from the equations of the docstring, with the same inputs
+    xh, fh = np.zeros(plant.n), np.zeros(plant.q)
+    rows = []
+    for k in range(STEPS):
+        y = C @ x
+        a = K_AP * float(y[0])
+        total = a + c_prev[0]  # what the vehicle reports at instant k
+        if compensate:
+            res, comp = est.compensate(s, k, y, [total], c_prev)
+        else:
+            res, comp = est.observe(s, k, y, [total], u_prev=[total]), [0.0]
+        expected_c = (
+            float(np.clip(fault_compensation(plant) @ fh, -plant.actuator.limit, plant.actuator.limit)[0])
+            if compensate
+            else 0.0
+        )
+        rows.append((k, float(y[0]), float(res.f_hat[0]), comp[0], expected_c, float(fh[0])))
+        r = y - C @ xh
+        xh = A @ xh + (B0 + B1).ravel() * a + B0.ravel() * comp[0] + B1.ravel() * c_prev[0] + Df @ fh + g.L @ r
+        fh = fh + g.M @ r
+        f = BIAS if k >= ONSET else 0.0
+        x = A @ x + (B0 + B1).ravel() * a + B0.ravel() * comp[0] + B1.ravel() * c_prev[0] + Df.ravel() * f
+        c_prev = comp
+    return rows
+
+
+def test_the_compensation_is_the_fault_term_times_the_estimate_of_the_independent_observer() -> None:
+    rows = _fly(compensate=True)
+    for k, _y, f_hat, comp, expected, fh_indep in rows:
+        assert f_hat == pytest.approx(fh_indep, abs=1e-9), k
+        assert comp == pytest.approx(expected, abs=1e-9), k
+    assert any(abs(r[3]) > 0.05 for r in rows if r[0] > ONSET + 2)  # it really compensates after the onset
+
+
+def test_with_the_delay_split_modelled_the_estimate_settles_on_the_bias() -> None:
+    rows = _fly(compensate=True)
+    late = [f for k, _y, f, *_ in rows if k >= ONSET + 8]
+    assert max(abs(f - BIAS) for f in late) < 0.05 * BIAS, late
+    assert max(abs(f) for k, _y, f, *_ in rows if k < ONSET) < 1e-9  # no fault, no estimate
+
+
+def test_the_compensation_takes_the_fault_s_offset_out_of_the_output() -> None:
+    without = _fly(compensate=False)
+    with_c = _fly(compensate=True)
+    offset = abs(without[-1][1])
+    assert offset > 0.2  # the bias moves the output the autopilot alone holds
+    assert abs(with_c[-1][1]) < 0.5 * offset, (with_c[-1][1], offset)
+
+
+def test_for_an_actuator_fault_the_compensation_is_minus_the_estimate() -> None:
+    from monitor.model.plant import parse_plant
+    from tests.aircraft_files import AIRCRAFT_PLANT
+
+    plant = parse_plant(AIRCRAFT_PLANT, "aircraft")  # D_cf = B_c: an elevator bias
+    assert fault_compensation(plant) == pytest.approx(-np.eye(1), abs=1e-9)
