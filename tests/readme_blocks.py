@@ -1,7 +1,13 @@
-"""The README's code blocks, the marker that says how the suite checks each one, and a harness that runs the
-blocks marked ``run`` as a user types them.
+"""The code blocks of the README and of every documentation page (``docs/**/*.md``), the marker that says how the
+suite checks each one, and a harness that runs the blocks marked ``run`` as a user types them.
 
-The marker is an HTML comment (GitHub does not show it) among the comment lines directly above the opening fence:
+The pages are ``README.md`` and every ``*.md`` under ``docs/`` (``pages()``), in that order: README first, then the
+docs pages sorted by path, each page's blocks in their order there; a run group's blocks are taken in that order
+(a group may span pages). Every page follows the same rules: each fenced block carries a marker, and no code block
+is indented (it could carry none).
+
+The marker is an HTML comment (neither GitHub nor the site shows it) among the comment lines directly above the
+opening fence:
 
     <!-- readme: run GROUP -->               run by GROUP's test (tests/test_readme.py's RUN_GROUPS names each)
     <!-- readme: run GROUP; not run: CMD (REASON) -->   the same, except the lines that start with CMD
@@ -21,7 +27,7 @@ started is stopped when the session ends: SIGINT (Ctrl-C), then SIGTERM and SIGK
 
 What the harness rewrites, and nothing else:
 
-* ports: each fixed loopback port of the README (``127.0.0.1:PORT``) becomes a free port picked for the session, the
+* ports: each fixed loopback port of the pages (``127.0.0.1:PORT``) becomes a free port picked for the session, the
   same one in every block and file of the session; a command that relies on a default port (``sim-vehicle run`` and
   ``fault-monitor run`` without ``--mavlink``: 14550; ``fault-monitor router`` without ``-l``: 7447) has it spelled
   out, with its substitute;
@@ -48,6 +54,19 @@ from monitor.process import udp_port_taken
 from tests.daemons import REPO, free_udp_port, wait_for
 
 README = REPO / "README.md"
+DOCS = REPO / "docs"
+
+
+def pages() -> tuple[Path, ...]:
+    """The pages whose blocks the suite checks: the README, then every Markdown page under docs/ by path."""
+    return (README, *sorted(DOCS.rglob("*.md")))
+
+
+def page_name(path: Path) -> str:
+    """A page as the messages name it: its path from the repository's top (``docs/how-to/zenoh.md``)."""
+    resolved = path.resolve()
+    return resolved.relative_to(REPO).as_posix() if resolved.is_relative_to(REPO) else str(path)
+
 
 _MARKER = re.compile(r"<!--\s*readme:\s*(.*?)\s*-->")
 _COMMENT_LINE = re.compile(r"^\s*<!--.*-->\s*$")
@@ -63,12 +82,19 @@ _KINDS = {
 
 @dataclass(frozen=True)
 class Block:
-    """One fenced block: the line of its opening fence (1-based), its language, its text and its marker."""
+    """One fenced block: the line of its opening fence (1-based), its language, its text, its marker and the page
+    it is on (its path from the repository's top)."""
 
     line: int
     lang: str
     text: str
     marker: str | None
+    page: str = "README.md"
+
+    @property
+    def where(self) -> str:
+        """``PAGE:LINE`` of the opening fence, as the messages name it."""
+        return f"{self.page}:{self.line}"
 
     def _match(self) -> tuple[str, dict[str, str]] | None:
         for kind, pattern in _KINDS.items():
@@ -99,7 +125,7 @@ class Block:
         return None
 
     def commands(self) -> list[tuple[int, str]]:
-        """Each command of a shell block with the README line it starts on: continuations joined, comments and
+        """Each command of a shell block with the page's line it starts on: continuations joined, comments and
         blank lines left out."""
         out: list[tuple[int, str]] = []
         pending: list[str] = []
@@ -118,9 +144,12 @@ class Block:
 
 
 @cache
-def blocks(path: Path = README) -> tuple[Block, ...]:
-    """Every fenced block of the README, in order."""
+def blocks(path: Path | None = None) -> tuple[Block, ...]:
+    """Every fenced block of one page, in order; without a page, every block of every page (``pages()``)."""
+    if path is None:
+        return tuple(b for page in pages() for b in blocks(page))
     lines = path.read_text("utf-8").splitlines()
+    name = page_name(path)
     found: list[Block] = []
     i = 0
     while i < len(lines):
@@ -130,18 +159,19 @@ def blocks(path: Path = README) -> tuple[Block, ...]:
             continue
         end = next((j for j in range(i + 1, len(lines)) if lines[j].startswith("```")), None)
         if end is None:
-            raise ValueError(f"{path.name}:{i + 1}: a fence that is never closed")
+            raise ValueError(f"{name}:{i + 1}: a fence that is never closed")
         marker, above = None, i - 1
         while above >= 0 and _COMMENT_LINE.match(lines[above]):
             tag = _MARKER.search(lines[above])
             marker = tag.group(1) if tag else marker
             above -= 1
-        found.append(Block(i + 1, opening.group(1), "".join(line + "\n" for line in lines[i + 1 : end]), marker))
+        text = "".join(line + "\n" for line in lines[i + 1 : end])
+        found.append(Block(i + 1, opening.group(1), text, marker, name))
         i = end + 1
     return tuple(found)
 
 
-def indented_code_lines(path: Path = README) -> list[int]:
+def indented_code_lines(path: Path) -> list[int]:
     """Lines that open a code block by indentation (four spaces after a blank line, outside a fence): such a
     block can carry no marker, so it must be fenced."""
     lines = path.read_text("utf-8").splitlines()
@@ -155,7 +185,7 @@ def indented_code_lines(path: Path = README) -> list[int]:
 
 
 def group(name: str) -> list[Block]:
-    """The blocks marked ``run NAME``, in README order."""
+    """The blocks marked ``run NAME``, in page order (``pages()``) and in order on each page."""
     return [b for b in blocks() if b.kind == "run" and b.arg("group") == name]
 
 
@@ -180,7 +210,7 @@ _OURS = re.compile(r"^(fault-monitor|sim-vehicle)\b")
 
 
 def _free_port() -> int:
-    """A loopback port free for both UDP and TCP (the README uses some ports for each)."""
+    """A loopback port free for both UDP and TCP (the pages use some ports for each)."""
     while True:
         port = free_udp_port()
         with socket.socket() as s:
@@ -196,7 +226,7 @@ class Step:
     """One command (or Python block) started by a session."""
 
     block: Block
-    line: int  # the README line it starts on
+    line: int  # the line of its page it starts on
     command: str  # as run, after the rewrites
     proc: subprocess.Popen
     out_path: Path
@@ -211,7 +241,7 @@ class Step:
         return self.err_path.read_text(errors="replace")
 
     def where(self) -> str:
-        return f"README.md:{self.line}: {self.command}"
+        return f"{self.block.page}:{self.line}: {self.command}"
 
     def failure(self, what: str) -> str:
         return f"{self.where()}\n{what}\nstdout:\n{self.out()[-2000:]}\nstderr:\n{self.err()[-3000:]}"
@@ -263,10 +293,10 @@ class Session:
             _end(step, signal.SIGTERM, 5.0)
 
     # the rewrites ---------------------------------------------------------------------------------------------------
-    def port(self, readme_port: int) -> int:
-        if readme_port not in self.ports:
-            self.ports[readme_port] = _free_port()
-        return self.ports[readme_port]
+    def port(self, page_port: int) -> int:
+        if page_port not in self.ports:
+            self.ports[page_port] = _free_port()
+        return self.ports[page_port]
 
     def rewrite_ports(self, text: str) -> str:
         return _LOOPBACK_PORT.sub(lambda m: str(self.port(int(m.group(1)))), text)
@@ -295,7 +325,7 @@ class Session:
         self.blocks_run.append(block)
         if block.lang == "python":
             looping = "while True" in block.text
-            script = self.logs / f"block-{block.line}.py"
+            script = self.logs / f"block-{Path(block.page).stem}-{block.line}.py"
             script.write_text(self.rewrite_ports(block.text))
             step = self._start(
                 block,
@@ -316,7 +346,7 @@ class Session:
             steps.append(self._start(block, line, command, bg if background is None else background))
         if skip:
             assert any(c.startswith(skip) for _l, c in block.commands()), (
-                f"README.md:{block.line}: the marker skips '{skip}', which the block does not have"
+                f"{block.where}: the marker skips '{skip}', which the block does not have"
             )
         return steps
 
@@ -367,8 +397,8 @@ class Session:
                 assert step.returncode == 0, step.failure(f"exit code {step.returncode} after Ctrl-C")
 
     def assert_ran_all(self, name: str) -> None:
-        missing = [b.line for b in group(name) if b not in self.blocks_run]
-        assert not missing, f"README blocks of group '{name}' at lines {missing} were not run by its test"
+        missing = [b.where for b in group(name) if b not in self.blocks_run]
+        assert not missing, f"blocks of group '{name}' at {missing} were not run by its test"
 
 
 def _group_alive(pgid: int) -> bool:

@@ -1,4 +1,5 @@
-"""The notebook API: its doctests run here, and a fresh interpreter can follow the README's example."""
+"""The notebook API: its doctests run here, and a fresh interpreter can follow the example of its reference page
+(docs/reference/api.md)."""
 
 from __future__ import annotations
 
@@ -19,7 +20,8 @@ def test_the_api_docstrings_are_true():
 
 
 def test_the_readme_python_block_runs_as_it_stands_in_a_fresh_directory(tmp_path):
-    """The README's notebook example, copied as it stands, in a plain interpreter: it makes the recording it reads."""
+    """The API page's notebook example, copied as it stands, in a plain interpreter: it makes the recording it
+    reads."""
     (block,) = group("notebook")  # the block marked <!-- readme: run notebook --> (tests/readme_blocks.py)
     with Session(tmp_path) as s:
         (script,) = s.run(block)  # a script in a fresh directory; it must exit 0

@@ -48,10 +48,8 @@ def test_the_readme_monitor_file_sets_run_flags_and_flags_still_win(tmp_path):
     assert args.mavlink == ["udpin:127.0.0.1:14551", "udpin:127.0.0.1:14552"]
     kept = parse_args_with_config(monitor_parser(), ["run", "--config", str(conf)])
     assert kept.mavlink == ["udpin:127.0.0.1:14550"]  # not given: the file's list
-    assert (
-        "systemd" in (REPO / "README.md").read_text()
-        and "fault-monitor run --config /etc/fault-monitor/monitor.toml" in (REPO / "README.md").read_text()
-    )
+    page = (REPO / file_block("monitor.toml").page).read_text()  # docs/how-to/configuration.md
+    assert "systemd" in page and "fault-monitor run --config /etc/fault-monitor/monitor.toml" in page
 
 
 def test_keys_take_either_spelling_switches_and_lists():

@@ -1,6 +1,7 @@
-"""The README is a test: every code block carries a marker (``tests/readme_blocks.py``), and every block marked
-``run`` runs here as a user types it, under the harness's rewrites (free ports, fewer and faster samples). The
-notebook block runs in ``tests/test_api.py``.
+"""The README and the documentation pages are a test: every code block of ``README.md`` and of every page under
+``docs/`` carries a marker (``tests/readme_blocks.py``), and every block marked ``run`` runs as a user types it, under
+the harness's rewrites (free ports, fewer and faster samples): the paper and router groups here, the others in the
+tests ``RUN_GROUPS`` names (the notebook block in ``tests/test_api.py``).
 """
 
 from __future__ import annotations
@@ -18,9 +19,19 @@ import pytest
 
 from tests.daemons import wait_for
 from tests.dataflash_formats import FORMATS
-from tests.readme_blocks import Block, Session, blocks, check_command_parses, group, indented_code_lines
+from tests.readme_blocks import (
+    README,
+    Block,
+    Session,
+    blocks,
+    check_command_parses,
+    group,
+    indented_code_lines,
+    page_name,
+    pages,
+)
 
-# every group of run blocks and the test that runs it: a group added to the README without a test fails here
+# every group of run blocks and the test that runs it: a group added to a page without a test fails here
 RUN_GROUPS = {
     "paper": "tests/test_readme.py::test_paper_daemons_then_the_replay_of_their_recording",
     "router": "tests/test_readme.py::test_router_its_clients_and_a_python_subscriber",
@@ -31,13 +42,30 @@ RUN_GROUPS = {
 }
 
 
+def test_the_pages_are_the_readme_and_every_docs_page() -> None:
+    names = [page_name(p) for p in pages()]
+    assert names[0] == "README.md" and "docs/index.md" in names and "docs/layout.md" in names, names
+    assert all(n.startswith("docs/") and n.endswith(".md") for n in names[1:]), names
+    # the blocks that used to be the README's are still checked wherever they now live
+    assert {b.arg("group") for b in blocks() if b.kind == "run"} >= {"paper", "router", "mavproxy", "notebook"}
+    assert {b.page for b in blocks()} - {"README.md"}, "no docs page has a block: pages() lost docs/"
+
+
 def test_every_block_carries_a_marker() -> None:
-    problems = [f"README.md:{b.line}: {b.problem()}" for b in blocks() if b.problem()]
+    problems = [f"{b.where}: {b.problem()}" for b in blocks() if b.problem()]
     problems += [
-        f"README.md:{line}: a code block indented by four spaces can carry no marker: fence it (```)"
-        for line in indented_code_lines()
+        f"{page_name(page)}:{line}: a code block indented by four spaces can carry no marker: fence it (```)"
+        for page in pages()
+        for line in indented_code_lines(page)
     ]
     assert not problems, "\n".join(problems)
+
+
+def test_the_readme_keeps_the_ci_test_command() -> None:
+    """.ci/run runs the line after the ci:test-command marker, which must be the bash block's command."""
+    lines = README.read_text("utf-8").splitlines()
+    (at,) = [i for i, line in enumerate(lines) if "ci:test-command" in line]
+    assert lines[at + 1] == "```bash" and lines[at + 2].startswith("python -m pip install -c constraints.txt '.[test]'")
 
 
 def test_every_run_group_has_its_test() -> None:
@@ -67,16 +95,16 @@ def _not_run_commands() -> list[tuple[Block, int, str]]:
 def test_commands_not_run_still_parse() -> None:
     """Flags of blocks that are not run exist and take the values given (the real parsers, nothing executed)."""
     problems = [
-        f"README.md:{line}: {command}\n  {complaint}"
-        for _b, line, command in _not_run_commands()
+        f"{block.page}:{line}: {command}\n  {complaint}"
+        for block, line, command in _not_run_commands()
         if (complaint := check_command_parses(command))
     ]
     assert not problems, "\n".join(problems)
     assert len(_not_run_commands()) >= 8  # the parse check is not silently empty
 
 
-# the DataFlash messages the README's ArduPlane map names: those tests/test_dataflash.py writes, and the pitch
-# controller's PIDP as ArduPlane 4.x declares it in its FMT record
+# the DataFlash messages the ArduPlane map (docs/tutorials/flight-logs.md) names: those tests/test_dataflash.py
+# writes, and the pitch controller's PIDP as ArduPlane 4.x declares it in its FMT record
 ARDUPLANE_FORMATS = {**FORMATS, "PIDP": (136, "QffffffffffB", "TimeUS,Tar,Act,Err,P,I,D,FF,DFF,Dmod,SRate,Flags")}
 
 
@@ -93,7 +121,7 @@ def _layouts(kind: str):
     return DataFlashLayouts(formats, {name: t for name, (t, _f, _c) in ARDUPLANE_FORMATS.items()})
 
 
-@pytest.mark.parametrize("block", [b for b in blocks() if b.kind == "signals"], ids=lambda b: f"line{b.line}")
+@pytest.mark.parametrize("block", [b for b in blocks() if b.kind == "signals"], ids=lambda b: b.where)
 def test_signal_maps_are_read_by_the_map_reader(block: Block) -> None:
     """A map with ``outputs`` as run and analyse read it (for a plant with as many outputs as C has rows, when the
     block shows C); one without, as identify reads it for each of its models."""
@@ -102,7 +130,7 @@ def test_signal_maps_are_read_by_the_map_reader(block: Block) -> None:
     from monitor.pipelines.identify_log import map_for
 
     raw = tomllib.loads(block.text)
-    table, where, layouts = raw["signals"], f"README.md:{block.line}", _layouts(block.arg("layouts"))
+    table, where, layouts = raw["signals"], block.where, _layouts(block.arg("layouts"))
     if "outputs" not in table:
         for states in MODELS.values():
             assert map_for(table, where, states, layouts)[0].outputs == states
@@ -115,7 +143,7 @@ def test_signal_maps_are_read_by_the_map_reader(block: Block) -> None:
 @pytest.mark.parametrize("block", [b for b in blocks() if b.kind == "file"], ids=lambda b: b.arg("name"))
 def test_files_parse(block: Block) -> None:
     if block.arg("name").endswith(".toml"):
-        assert tomllib.loads(block.text), f"README.md:{block.line}: an empty file"
+        assert tomllib.loads(block.text), f"{block.where}: an empty file"
 
 
 # -- the run groups -------------------------------------------------------------------------------------------------
@@ -170,7 +198,7 @@ def test_router_its_clients_and_a_python_subscriber(tmp_path: Path, gains_file: 
     flies again (the same command): each sees the monitor through the router."""
     routed, bundled, script = group("router")
     with Session(tmp_path, steps=STEPS, speedup=SPEEDUP) as s:
-        shutil.copy(gains_file, s.dir / "gains.toml")  # the README's design line (run by the paper group's test)
+        shutil.copy(gains_file, s.dir / "gains.toml")  # the design line of the paper group (run by its test)
         _router, _monitor, subscriber, flight = s.run(routed)
         wait_for(lambda: _printed_last_sample(subscriber.out()), 10, what="the subscriber to print the last sample")
         (python,) = s.run(script)
