@@ -40,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
             "delay (IEEE Access 2021 integrated FE/FTC design, repaired and certified). Offline: design and "
             "verify gains. Online: run the monitor daemon, subscribe to its estimates, replay its recordings."
         ),
-        epilog="Start with: fault-monitor demo --out demo-out   (see README.md)",
+        epilog="Start with: fault-monitor demo --out demo-out   (see docs/index.md)",
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

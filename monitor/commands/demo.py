@@ -1,4 +1,4 @@
-"""``fault-monitor demo``: the paper's comparison end to end, the README's main job."""
+"""``fault-monitor demo``: the paper's comparison end to end, the project's first tutorial (docs/tutorials/demo.md)."""
 
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ clipped, and its legend entry says so. Why the legend sits outside the axes and 
 line style and staggered markers: after the fault is compensated several designs lie on the same value,
 and a legend box or a solid line on top would hide a trace (the certified one was hidden from k = 62).
 Why a design that could not be designed still has a legend entry (no curve): a reader comparing with the
-README's figures sees that it is missing on purpose, not lost.
+figures in the docs sees that it is missing on purpose, not lost.
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ the controller nothing of the observer's), but each is robust over the polytope 
 * K3 cancels a constant fault in steady state, as in every design here.
 
 The weights are the smallest round values for which the combined loop of both presets is stable
-(README, "A robust separate baseline"); with weights 1 the parts are each robust but the loop is not.
+(docs/explanation/method.md, the design methods); with weights 1 the parts are each robust but the loop is not.
 No common certificate is claimed: ``verify`` judges the real loop.
 """
 

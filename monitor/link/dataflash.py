@@ -46,7 +46,7 @@ _TEXT_CODES = set("nNZa")  # strings and the int16[32] array: not a signal
 _CHUNK = 4096  # records read per call into pymavlink (its prints are caught around each call)
 _HINT = (
     "a DataFlash log names its own messages: give a signal map of them with --signals FILE (ArduPlane's "
-    "is in the README, 'MAVLink 1 and DataFlash logs')"
+    "is in docs/tutorials/flight-logs.md, 'DataFlash logs')"
 )
 
 

@@ -19,7 +19,7 @@ file's, ``fault-monitor design --fault-time-constant``), the *reported* estimate
 a chosen bandwidth, while the loop (controller and observer) keeps the raw estimate, so its certificate is
 unchanged. Why: in turbulence the deadbeat estimate passes every gust that looks like a fault; on a c172p in
 light turbulence, 1 s of filtering took the false alarms at 1 deg in 120 s from 34 to 0, for a detection 0.5 s
-later (README, the trade table).
+later (docs/explanation/turbulence.md, the trade table).
 
 Which u(k-1): the contract says the deflection the vehicle *reports* at sample k (``u_prev``), because a
 command that was lost or late never acted; only when no report came does the estimator use its own

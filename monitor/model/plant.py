@@ -1,6 +1,6 @@
 """Plant descriptions: loading, validating and naming the sampled plant with uncertain short delay.
 
-A plant file is TOML in one of two forms (see the README):
+A plant file is TOML in one of two forms (docs/reference/file-formats.md):
 
 * ``form = "continuous"``: ``A_c, B_c, D_cf, D_cd, C`` plus ``h, tau_min, tau_max``. The delay-aware
   discrete model follows exactly from it (``monitor.model.discretize``); the simulator integrates it.
