@@ -24,7 +24,8 @@ FALLBACK_BUDGET_S = 8.0
 # the reported f_hat of a plant that flies in turbulence (its [disturbance] table names a level) is low-passed with
 # this time constant by default: measured on c172p at 20 Hz over 120 s of light and moderate JSBSim turbulence, it
 # takes the false alarms at a 1-deg threshold from 34 and 102 to 0 and 1, and |e_f| RMS from 0.50 to 0.29 deg (light),
-# for a detection 0.6 s (light) to 1.2 s (moderate) after the onset of a 2-deg bias (docs/explanation/turbulence.md, the trade table)
+# for a detection 0.6 s (light) to 1.2 s (moderate) after the onset of a 2-deg bias
+# (docs/explanation/turbulence.md, the trade table)
 FAULT_FILTER_S = 1.0
 
 

@@ -1,9 +1,10 @@
 """The plant file's text from an identification: ``plant_toml`` (the whole file) and ``disturbance_table``.
 
-Why apart from ``monitor.model.identification``: that module estimates (arrays in, a model out); this one writes
-the plant file format (docs/reference/file-formats.md). They change for different reasons (a better fit, or a new field of the file), and
-``identify --air-only`` needs only the ``[disturbance]`` table, not the estimator. Pure functions returning text:
-the caller (``monitor.pipelines.identify_log``) checks the text loads as a plant and writes the file.
+Why apart from ``monitor.model.identification``: that module estimates (arrays in, a model out); this one
+writes the plant file format (docs/reference/file-formats.md). They change for different reasons (a better
+fit, or a new field of the file), and ``identify --air-only`` needs only the ``[disturbance]`` table, not the
+estimator. Pure functions returning text: the caller (``monitor.pipelines.identify_log``) checks the text
+loads as a plant and writes the file.
 """
 
 from __future__ import annotations
@@ -80,7 +81,7 @@ def plant_toml(
     model: str,
     header: list[str] | None = None,
 ) -> str:
-    """The plant file ``fault-monitor design`` / ``run`` take as it is (the plant file format (docs/reference/file-formats.md)).
+    """The plant file ``fault-monitor design`` / ``run`` take as it is (docs/reference/file-formats.md).
 
     ``signals`` is the ``[signals]`` table without ``operating_point`` (added here) and with ``measured`` and
     ``command`` sub-tables. ``D_cf = B_c`` (an elevator fault), ``D_cd`` = the alpha column of ``A_c`` (a
