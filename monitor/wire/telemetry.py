@@ -9,7 +9,9 @@ all of them, and a test encodes a sample and decodes it through the link layer.
 Each sample k is one datagram (loss and reordering act on whole samples). Quantities are in plant units
 (degrees, deg/s, m/s); each row says how the wire carries one: ``wire value * scale = plant value``. The
 linear plant reports alpha, q and the elevator (``Sample``); an aircraft adds its attitude, body rates and
-VFR_HUD (``AircraftSample``). The sample's instant is ``AOA_SSA.time_usec`` (k h in microseconds);
+VFR_HUD (``AircraftSample``), and, flown by its own autopilot (``sim-vehicle --mission``), the autopilot's part of
+the elevator and the compensation received from outside in ``actuator[1]`` and ``actuator[2]`` (``actuator[0]``
+stays the whole deflection applied). The sample's instant is ``AOA_SSA.time_usec`` (k h in microseconds);
 ``ATTITUDE.time_boot_ms`` and ``ACTUATOR_OUTPUT_STATUS.time_usec`` carry the same instant; ``VFR_HUD`` has no
 time field and travels in the same datagram.
 
@@ -74,6 +76,9 @@ SAMPLE_FIELDS: tuple[SampleField, ...] = (
     SampleField("altitude", "VFR_HUD", "alt", None, 1.0, "m", (-500.0, 20000.0)),
     SampleField("climb", "VFR_HUD", "climb", None, 1.0, "m/s", (-100.0, 100.0)),
     SampleField("elevator", "ACTUATOR_OUTPUT_STATUS", "actuator", 0, 1.0, "deg", (-90.0, 90.0)),
+    # an aircraft flown by its own autopilot (sim-vehicle --mission): the two parts of the elevator in actuator[0]
+    SampleField("autopilot_elevator", "ACTUATOR_OUTPUT_STATUS", "actuator", 1, 1.0, "deg", (-90.0, 90.0)),
+    SampleField("compensation", "ACTUATOR_OUTPUT_STATUS", "actuator", 2, 1.0, "deg", (-90.0, 90.0)),
 )
 INSTANT_MESSAGE = "AOA_SSA"  # the message whose time field defines sample k
 _MESSAGE_ORDER = ("ATTITUDE", "AOA_SSA", "VFR_HUD", "ACTUATOR_OUTPUT_STATUS")  # in the datagram
@@ -109,6 +114,10 @@ class AircraftSample(Sample):
     attitude: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # roll, yaw (rad), p, r (rad/s)
     # groundspeed (m/s), heading (deg), throttle (%), altitude (m), climb (m/s)
     hud: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    # flown by its own autopilot (a mission): its own elevator and the compensation received, whose sum (clipped to
+    # the travel) is elevator_deg; 0 when nobody flies on board
+    autopilot_elevator: float = 0.0
+    compensation: float = 0.0
 
 
 def quantities(sample: Sample) -> dict[str, float]:
@@ -129,6 +138,8 @@ def quantities(sample: Sample) -> dict[str, float]:
             throttle=throttle,
             altitude=altitude,
             climb=climb,
+            autopilot_elevator=sample.autopilot_elevator,
+            compensation=sample.compensation,
         )
     return values
 
@@ -162,9 +173,11 @@ def _message(name: str, fields: dict[str, float], elements: dict[str, dict[int, 
         )
     if name == "ACTUATOR_OUTPUT_STATUS":
         actuator = [0.0] * 32
+        active = 0  # the bitmask of the outputs the sample fills
         for index, value in elements.get("actuator", {}).items():
             actuator[index] = float(value)
-        return mavlink.MAVLink_actuator_output_status_message(t_us, 1, actuator)
+            active |= 1 << index
+        return mavlink.MAVLink_actuator_output_status_message(t_us, active, actuator)
     raise ValueError(f"no encoder for message {name}")  # pragma: no cover - SAMPLE_FIELDS names only the above
 
 
