@@ -34,8 +34,13 @@ examples:
   # a JSBSim Cessna 172 trimmed at 100 kt / 3000 ft, sampled at 20 Hz, in light turbulence, 10 minutes
   sim-vehicle run --aircraft c172p --rate 20 --turbulence light --steps 12000 --speedup 10 --fault bias:2@2000
 
-  # an identification manoeuvre: +-1 deg PRBS about trim for 60 s (record it with MAVProxy, see README)
+  # an identification manoeuvre: +-1 deg PRBS about trim for 60 s (record it with MAVProxy, see
+  # docs/tutorials/aircraft.md)
   sim-vehicle run --aircraft c172p --excite prbs:1:60 --steps 2400 --speedup 5 --no-zenoh
+
+  # a mission: turns, a slow-down, a climb and a descent flown by the vehicle's own autopilot, the monitor's
+  # commands added to its elevator as a compensation
+  sim-vehicle run --aircraft c172p --mission docs/examples/mission-manoeuvres.toml --compensation --speedup 10
 
   # watch the ground truth from another terminal
   sim-vehicle run --zenoh-listen tcp/127.0.0.1:7447 &
@@ -181,6 +186,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="none, light, moderate or severe: JSBSim's MIL-F-8785C Dryden turbulence, seeded by --seed "
         "(default: none)",
     )
+    a.add_argument(
+        "--mission",
+        default=None,
+        metavar="FILE",
+        help="fly a TOML timeline of [[segment]] tables (airspeed, altitude or climb, bank or heading, duration; "
+        "docs/missions.md) on the vehicle's own autopilot, trimmed at the first segment; the run ends with the "
+        "mission (or --steps). Not with --excite, --autopilot, --airspeed, --altitude",
+    )
+    a.add_argument(
+        "--compensation",
+        action="store_true",
+        help="with --mission: an elevator command received (SET_ACTUATOR_CONTROL_TARGET, after its delay) is a "
+        "compensation in degrees added to the autopilot's elevator (default: commands from outside are ignored)",
+    )
     n = run.add_argument_group("network (emulated on top of the real UDP path)")
     n.add_argument(
         "--delay",
@@ -310,15 +329,19 @@ def cmd_run(args: argparse.Namespace) -> int:
             autopilot=settings.autopilot,
             model=model,
             excite=settings.excite,
+            compensation=settings.compensation,
         )
         weather = f"turbulence {settings.aircraft.turbulence}" if settings.aircraft else f"wind {args.wind or 'paper'}"
+        mission = settings.aircraft.mission if settings.aircraft is not None else None
         log.info(
-            "%s, fault %s, delay %s, %s, excite %s, truth on %s",
+            "%s, fault %s, delay %s, %s, excite %s, mission %s%s, truth on %s",
             settings.vehicle,
             settings.fault,
             settings.delay,
             weather,
             settings.excite or "none",
+            mission or "none",
+            " (commands from outside: compensation)" if settings.compensation else "",
             truth_key if session is not None else "(no zenoh)",
         )
         decoder = CommandDecoder(settings.sysid, settings.h, signing_key)

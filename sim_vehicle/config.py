@@ -18,6 +18,12 @@ or, for a JSBSim aircraft::
     turbulence = "light"
     excite = "prbs:1:60"
 
+or an aircraft flying a mission (``docs/missions.md``)::
+
+    aircraft = "c172p"
+    mission = "docs/examples/mission-manoeuvres.toml"
+    compensation = true
+
 Flags given on the command line win over the file. Why strict: an unknown key (``dealy``) silently
 ignored would run a different experiment than the one written down, so it is an error. The file is
 read by ``monitor.config_file``, the same reader as ``fault-monitor run --config``.
@@ -74,6 +80,7 @@ class Settings:
     autopilot: np.ndarray | None = None
     aircraft: AircraftSpec | None = None
     excite: Excitation | None = None
+    compensation: bool = False  # a mission: commands from outside add to the autopilot's elevator
 
     @property
     def h(self) -> float:
@@ -128,6 +135,7 @@ def _aircraft_spec(args: argparse.Namespace, seed: int):
     from sim_vehicle.jsbsim_model import DEFAULT_DT, AircraftSpec
 
     name = str(args.aircraft)
+    mission = _mission(args)
     for flag in ("plant", "wind", "x0", "autopilot"):
         if getattr(args, flag, None) is not None:
             why = {
@@ -138,6 +146,9 @@ def _aircraft_spec(args: argparse.Namespace, seed: int):
             }[flag]
             raise UserError(f"--{flag.replace('_', '-')} does not go with --aircraft: {why}")
     value = {k: AIRCRAFT_DEFAULTS[k] if getattr(args, k, None) is None else getattr(args, k) for k in AIRCRAFT_DEFAULTS}
+    if mission is not None:  # trimmed where the mission starts
+        first = mission.segments[0]
+        value["airspeed"], value["altitude"] = first.airspeed_kt, first.altitude_ft
     airspeed, altitude, rate = (_number(value[k], k) for k in ("airspeed", "altitude", "rate"))
     for flag, v in (("airspeed", airspeed), ("altitude", altitude), ("rate", rate)):
         if not (v > 0 and np.isfinite(v)):
@@ -157,13 +168,38 @@ def _aircraft_spec(args: argparse.Namespace, seed: int):
         dt=dt,
         turbulence=turbulence,
         seed=seed,
+        mission=mission,
     )
+
+
+def _mission(args: argparse.Namespace):  # -> Mission | None (imported lazily, with the aircraft's modules)
+    """``--mission FILE`` read and checked, or None; the flags a mission replaces are refused, one line each."""
+    path = getattr(args, "mission", None)
+    if path is None:
+        return None
+    from sim_vehicle.mission import load_mission
+
+    for flag, why in (
+        ("excite", "give a segment an excite key instead (a PRBS on the autopilot's elevator)"),
+        ("airspeed", "the aircraft is trimmed at the first segment's airspeed"),
+        ("altitude", "the aircraft is trimmed at the first segment's altitude"),
+    ):
+        if getattr(args, flag, None) is not None:
+            raise UserError(f"--{flag} does not go with --mission: {why}")
+    return load_mission(path)
 
 
 def settings_from_args(args: argparse.Namespace) -> Settings:
     """Validate the parsed flags into ``Settings`` (one-line ``UserError`` on anything wrong)."""
     seed = int(args.seed)
     aircraft = None
+    if getattr(args, "mission", None) is not None:
+        if getattr(args, "aircraft", None) is None:
+            raise UserError("--mission needs --aircraft NAME: a JSBSim aircraft's autopilot flies it")
+        if getattr(args, "autopilot", None) is not None:
+            raise UserError("--autopilot does not go with --mission: the aircraft's own autopilot flies the mission")
+    elif getattr(args, "compensation", False):
+        raise UserError("--compensation goes with --mission: it adds to the mission autopilot's elevator")
     if getattr(args, "aircraft", None) is not None:
         aircraft = _aircraft_spec(args, seed)
         plant, h = None, aircraft.h
@@ -181,6 +217,8 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
     steps = None if args.steps in (None, 0) else int(args.steps)
     if steps is not None and steps < 0:
         raise UserError(f"--steps must be positive (0: until a signal), got {steps}")
+    if aircraft is not None and aircraft.mission is not None:  # the mission's length, unless --steps is shorter
+        steps = min(steps or aircraft.mission.steps(h), aircraft.mission.steps(h))
     speedup = _number(args.speedup, "speedup")
     if not speedup > 0:
         raise UserError(f"--speedup must be positive, got {speedup:g}")
@@ -225,6 +263,7 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
         autopilot=_autopilot_gain(getattr(args, "autopilot", None), plant) if plant is not None else None,
         aircraft=aircraft,
         excite=excite,
+        compensation=bool(getattr(args, "compensation", False)),
     )
 
 

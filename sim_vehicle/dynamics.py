@@ -12,6 +12,9 @@ for ``u(t0 + s) = u0 + r s`` and the constant ``w = D_cf f(k) + D_cd d(k)``. All
 one exponential of a Van Loan block matrix (the same idea as ``monitor.model.discretize.integral_expm``, one
 block larger for the ramp), so there are no Euler steps and no quadrature tolerance.
 
+``MissionServo``: the same interface for an aircraft flown by its own autopilot (a mission), whose servo moves at
+every JSBSim step and so lives in the flight model; it keeps the compensation received and the faults.
+
 ``Airframe``: the elevator servo and the deflection faults, in front of any ``FlightModel`` (the linear plant
 or a JSBSim aircraft). The commanded deflection is clipped to the surface's travel; with a rate limit the
 surface slews towards it (a ramp segment), otherwise it jumps. A ``stuck`` fault freezes the surface;
@@ -28,9 +31,9 @@ import numpy as np
 from scipy.linalg import expm
 
 from monitor.model.plant import Actuator, ContinuousModel, Plant
-from sim_vehicle.flight_model import FlightModel, Outputs
+from sim_vehicle.flight_model import FlightModel, Outputs, PilotedModel
 
-__all__ = ["segment_matrices", "LinearFlightModel", "Airframe"]
+__all__ = ["segment_matrices", "LinearFlightModel", "Airframe", "MissionServo"]
 
 
 def segment_matrices(A_c: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -204,6 +207,69 @@ class Airframe:
                 done = T >= abs(gap) / slewing
                 self.position = self.target if done else self.position + rate * T
             self.t = t if T >= t - self.t else self.t + T
+
+    @property
+    def u_effective(self) -> float:
+        return self.effectiveness * self.position
+
+
+class MissionServo:
+    """The elevator servo of an aircraft flown by its own autopilot (``--mission``): ``Airframe``'s interface.
+
+    Why not ``Airframe``: its servo moves only when a command acts, and holds the deflection between events; an
+    autopilot moves the elevator at every JSBSim step. So the servo lives in the flight model's own step loop
+    (``JSBSimFlightModel.fly``), and this class keeps what the event logic decides: the compensation received
+    from outside (``command``, after its delay; 0 until the first one), the surface faults of the interval
+    (``set_interval``: loss of effectiveness, stuck, the additive fault), and what the servo reported last
+    (``position``, the absolute deflection it put out, i.e. autopilot + compensation clipped to the travel, or
+    the stuck value; ``target``, the same before a stuck surface held it).
+    """
+
+    def __init__(self, flight: PilotedModel) -> None:
+        self.flight = flight
+        self.low, self.high = flight.travel
+        self.rate_limit = None
+        self.t = flight.t
+        self.position = float(flight.trim_deflection)
+        self.target = self.position
+        self.compensation = 0.0
+        self.effectiveness = 1.0
+        self.stuck = False
+        self._stuck_at: float | None = None
+        self.f = np.zeros(flight.n_faults)
+
+    def set_interval(
+        self,
+        f: Sequence[float] | np.ndarray,
+        d: Sequence[float] | np.ndarray,
+        effectiveness: float = 1.0,
+        stuck: bool = False,
+        stuck_value: float | None = None,
+    ) -> None:
+        """Hold the additive fault ``f`` and the deflection faults from now on (``d``: the aircraft's own weather)."""
+        self.f = np.asarray(f, dtype=float)
+        self.effectiveness = float(effectiveness)
+        if stuck and not self.stuck:  # frozen where the servo is now, or at the fault's value
+            self._stuck_at = self.position if stuck_value is None else float(stuck_value)
+            self.position = self._stuck_at
+        elif not stuck:
+            self._stuck_at = None
+        self.stuck = stuck
+
+    def command(self, u: float) -> None:
+        """A compensation (deg) reaches the servo now: it is added to the autopilot's elevator from now on."""
+        self.compensation = float(u)
+        self.flight.compensation = self.compensation
+
+    def advance_to(self, t: float) -> None:
+        """Fly from ``self.t`` to ``t`` on the autopilot, with the compensation and the faults in force."""
+        if t < self.t - 1e-12:
+            raise ValueError(f"time goes backwards: {t} < {self.t}")
+        if t > self.t:
+            self.flight.fly(t - self.t, self.compensation, self.effectiveness, self._stuck_at, self.f)
+            self.t = t
+        self.position = self.flight.servo
+        self.target = self.flight.servo_command
 
     @property
     def u_effective(self) -> float:

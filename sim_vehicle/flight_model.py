@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["FlightModel", "Outputs", "FlightModelError"]
+__all__ = ["FlightModel", "PilotedModel", "Outputs", "FlightModelError"]
 
 
 class FlightModelError(RuntimeError):
@@ -39,7 +39,8 @@ class Outputs:
     ``theta_deg``/``airspeed_m_s`` are None for a model without them (the linear short-period plant);
     ``attitude`` carries the rest of a full attitude solution when the model has one:
     ``(roll_rad, yaw_rad, rollspeed_rad_s, yawspeed_rad_s)``, and ``hud`` VFR_HUD's other fields:
-    ``(groundspeed_m_s, heading_deg, throttle_percent, alt_m, climb_m_s)``.
+    ``(groundspeed_m_s, heading_deg, throttle_percent, alt_m, climb_m_s)``. ``elevator_parts``, for an aircraft
+    flown by its own autopilot: ``(autopilot_deg, compensation_deg)``, the two parts of its elevator command.
     """
 
     alpha_deg: float
@@ -48,6 +49,7 @@ class Outputs:
     airspeed_m_s: float | None = None
     attitude: tuple[float, float, float, float] | None = None
     hud: tuple[float, float, int, float, float] | None = None
+    elevator_parts: tuple[float, float] | None = None
 
 
 @runtime_checkable
@@ -91,4 +93,30 @@ class FlightModel(Protocol):
 
     def close(self) -> None:
         """Release what the model holds (an FDM instance); idempotent."""
+        ...
+
+
+@runtime_checkable
+class PilotedModel(FlightModel, Protocol):
+    """A ``FlightModel`` flown by its own autopilot (a JSBSim aircraft on a mission), driven by ``MissionServo``.
+
+    Its elevator moves at every integration step (the autopilot's command plus the compensation received from
+    outside), so the servo is the model's: ``fly`` replaces ``step``.
+    """
+
+    piloted: bool  # True: fly() it, not step()
+    servo: float  # the servo's position now (deg): autopilot + compensation, clipped to the travel, or stuck
+    servo_command: float  # the same before a stuck surface held it
+    compensation: float  # the compensation in force (deg)
+
+    def fly(
+        self,
+        T: float,
+        compensation: float,
+        effectiveness: float,
+        stuck_at: float | None,
+        f: Sequence[float] | np.ndarray,
+    ) -> None:
+        """Fly ``T`` seconds on the autopilot with this compensation (deg) added to its elevator, the surface's
+        loss of effectiveness, a stuck surface's value (None: not stuck) and the additive fault ``f``."""
         ...

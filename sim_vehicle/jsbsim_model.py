@@ -30,6 +30,13 @@ Time. JSBSim integrates at a fixed step ``dt`` (1/120 s unless ``--dt``; made th
 that divides h, so every sampling instant k h is a step boundary). An event at time t takes effect at the
 step boundary nearest t (at most dt/2 away); states are read as JSBSim left them after its last step.
 
+A mission (``AircraftSpec.mission``). The aircraft is flown by the on-board autopilot (``sim_vehicle/autopilot.py``),
+stepped at every JSBSim step inside ``fly``, which replaces ``step``: the autopilot writes aileron, rudder and
+throttle and returns its elevator, the servo adds the compensation received from outside and clips to the travel,
+and the surface faults act on that. The autopilot's view of what the aircraft cannot do (a stall, the throttle on
+a stop with the airspeed off) raises ``FlightModelError`` naming the segment. The stall alpha comes from JSBSim's
+``aero/alpha-max-rad`` or the aircraft's lift table (``stall_alpha``).
+
 Turbulence: JSBSim's MIL-F-8785C Dryden model (``atmosphere/turb-type`` = 3, "Milspec") with the intensities
 JSBSim documents in FGWinds.h: light 25 ft/s at 20 ft AGL and probability-of-exceedance curve 3, moderate
 50 ft/s and 4, severe 75 ft/s and 6. Its random generator is seeded from ``--seed`` through
@@ -46,9 +53,11 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import xml.etree.ElementTree as ET
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -56,7 +65,19 @@ from monitor.errors import UserError
 from monitor.wire import TURBULENCE_INTENSITY  # (windspeed at 20 ft AGL, PoE curve) per level: JSBSim's table
 from sim_vehicle.flight_model import FlightModelError, Outputs
 
-__all__ = ["AircraftSpec", "JSBSimFlightModel", "DEFAULT_DT", "jsbsim_seed", "step_size"]
+if TYPE_CHECKING:
+    from sim_vehicle.autopilot import Autopilot
+    from sim_vehicle.mission import Mission, Timeline
+
+__all__ = [
+    "AircraftSpec",
+    "JSBSimFlightModel",
+    "DEFAULT_DT",
+    "DEFAULT_STALL_ALPHA_DEG",
+    "jsbsim_seed",
+    "step_size",
+    "stall_alpha",
+]
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +87,7 @@ FT_TO_M = 0.3048
 MILSPEC = 3  # atmosphere/turb-type: ttMilspec (Dryden spectrum, MIL-F-8785C)
 _PROBE = np.linspace(-1.0, 1.0, 81)  # commands probed for the elevator's scaling (0 and the ends included)
 _LCG_MODULUS = 2**31 - 1
+DEFAULT_STALL_ALPHA_DEG = 15.0  # when the aircraft's files say nothing (a light aircraft's stall is 14-18 deg)
 
 
 @dataclass(frozen=True)
@@ -80,6 +102,7 @@ class AircraftSpec:
     dt: float = DEFAULT_DT
     turbulence: str = "none"
     seed: int = 0
+    mission: Mission | None = None  # flown by the on-board autopilot (sim_vehicle/autopilot.py)
 
 
 def jsbsim_seed(seed: int) -> int:
@@ -192,6 +215,62 @@ def _locate(name: str, aircraft_dir: str | None, bundled_root: Path) -> tuple[Pa
     )
 
 
+def _aircraft_xml(spec: AircraftSpec, bundled_root: Path) -> Path:
+    """The file that defines the aircraft (where ``_locate`` finds it)."""
+    root, aircraft_path, add_name = _locate(spec.name, spec.aircraft_dir, bundled_root)
+    if aircraft_path is None:
+        return root / "aircraft" / spec.name / f"{spec.name}.xml"
+    return aircraft_path / spec.name / f"{spec.name}.xml" if add_name else aircraft_path / f"{spec.name}.xml"
+
+
+def stall_alpha(fdm, xml: Path | None) -> tuple[float, str]:  # noqa: ANN001 - a jsbsim.FGFDMExec
+    """The aircraft's stall angle of attack (deg) and where it comes from.
+
+    In order: JSBSim's ``aero/alpha-max-rad``, which an aircraft defining ``<alphalimits>`` sets (c172p:
+    0.28 rad = 16.0 deg); else the angle of attack at the peak of the lift table in the aircraft's LIFT axis
+    (the table looked up by alpha with the largest peak, its first column; J3Cub: 12.5 deg); else
+    ``DEFAULT_STALL_ALPHA_DEG`` (15 deg).
+    """
+    limit = float(fdm["aero/alpha-max-rad"])
+    if limit > 0:
+        return math.degrees(limit), "aero/alpha-max-rad"
+    peak = _lift_peak_deg(xml) if xml is not None else None
+    if peak is not None:
+        return peak, "the peak of its lift table"
+    return DEFAULT_STALL_ALPHA_DEG, "the default"
+
+
+def _lift_peak_deg(xml: Path) -> float | None:
+    """Alpha (deg) at the peak of the aircraft's lift-vs-alpha table, or None when its file has no such table."""
+    try:
+        tree = ET.parse(xml)
+    except (OSError, ET.ParseError):
+        return None
+    best: tuple[float, float] | None = None  # (peak lift coefficient, its alpha in degrees)
+    for axis in tree.getroot().iter("axis"):
+        if axis.get("name", "").upper() != "LIFT":
+            continue
+        for table in axis.iter("table"):
+            keys = table.findall("independentVar")
+            rows = [k for k in keys if k.get("lookup", "row") == "row"]
+            var = (rows[0].text or "").strip() if rows else ""
+            data = table.find("tableData")
+            if var not in ("aero/alpha-rad", "aero/alpha-deg") or data is None:
+                continue
+            try:
+                lines = [[float(v) for v in line.split()] for line in (data.text or "").splitlines() if line.split()]
+            except ValueError:
+                continue
+            points = [(line[0], line[1]) for line in lines[1 if len(keys) > 1 else 0 :] if len(line) >= 2]
+            if len(points) < 3:
+                continue
+            i = max(range(len(points)), key=lambda j: points[j][1])
+            alpha = math.degrees(points[i][0]) if var == "aero/alpha-rad" else points[i][0]
+            if 0 < i < len(points) - 1 and 0.0 < alpha < 45.0 and (best is None or points[i][1] > best[0]):
+                best = (points[i][1], alpha)
+    return None if best is None else best[1]
+
+
 def _load_and_trim(jsbsim, spec: AircraftSpec):
     """A trimmed FDM instance of ``spec`` (a ``UserError`` naming the reason when it cannot be had)."""
     bundled = Path(jsbsim.get_default_root_dir())
@@ -299,6 +378,54 @@ class JSBSimFlightModel:
         self.t = 0.0
         self.n = 0  # JSBSim steps taken
         self.surface = self.trim_deflection  # the deflection last put on the surface (faults included)
+        # a mission: the on-board autopilot flies, the servo adds the compensation from outside (``fly``)
+        self.autopilot: Autopilot | None = None
+        self.timeline: Timeline | None = None
+        self.servo = self.trim_deflection  # the servo's position: autopilot + compensation, clipped (or stuck)
+        self.servo_command = self.trim_deflection  # the same before a stuck surface held it
+        self.compensation = 0.0  # the compensation in force (deg), set by the servo when a command acts
+        self.stall_alpha_deg = DEFAULT_STALL_ALPHA_DEG
+        if spec.mission is not None:
+            self._engage(spec, spec.mission, Path(jsbsim.get_default_root_dir()))
+
+    def _engage(self, spec: AircraftSpec, mission: Mission, bundled_root: Path) -> None:
+        """Hand the trimmed aircraft to the autopilot, at JSBSim's trim commands."""
+        from sim_vehicle.autopilot import Autopilot, Trim
+
+        fdm = self.fdm
+        self.stall_alpha_deg, source = stall_alpha(fdm, _aircraft_xml(spec, bundled_root))
+        engines = max(1, int(fdm.get_propulsion().get_num_engines()))
+        trim = Trim(
+            elevator_deg=self.trim_deflection,
+            aileron=fdm["fcs/aileron-cmd-norm"],
+            rudder=fdm["fcs/rudder-cmd-norm"],
+            throttle=fdm["fcs/throttle-cmd-norm"],
+            theta_deg=fdm["attitude/theta-deg"],
+            airspeed_kt=fdm["velocities/vc-kts"],
+            altitude_ft=fdm["position/h-sl-ft"],
+            qbar_psf=fdm["aero/qbar-psf"],
+        )
+        self.autopilot = Autopilot(
+            trim,
+            (float(self._deg[0]), float(self._deg[-1])),
+            self.dt,
+            self.stall_alpha_deg,
+            throttles=tuple("fcs/throttle-cmd-norm" + (f"[{i}]" if i else "") for i in range(engines)),
+        )
+        self.timeline = mission.timeline(self.h, spec.seed)
+        log.info(
+            "mission %s on %s: stall alpha %.1f deg (%s), %d engine(s)",
+            mission,
+            self.name,
+            self.stall_alpha_deg,
+            source,
+            engines,
+        )
+
+    @property
+    def piloted(self) -> bool:
+        """Flown by its own autopilot (a mission): the servo drives it through ``fly``, not ``step``."""
+        return self.autopilot is not None
 
     def _inverse(self, commands: np.ndarray, deflections: np.ndarray, total: float) -> tuple[np.ndarray, np.ndarray]:
         """The probed map as (deflection, command), increasing, checked to be a usable static map."""
@@ -333,6 +460,8 @@ class JSBSimFlightModel:
     def step(
         self, T: float, deflection: float, rate: float, f: Sequence[float] | np.ndarray, d: Sequence[float] | np.ndarray
     ) -> None:
+        if self.autopilot is not None:
+            raise RuntimeError("an aircraft flying a mission is flown through fly(), by its autopilot")
         t_end = self.t + T
         n_end = int(math.floor(t_end / self.dt + 0.5))
         bias = float(f[0]) if len(f) else 0.0
@@ -345,6 +474,48 @@ class JSBSimFlightModel:
                 self._put(surface)
             if not fdm.run():
                 raise FlightModelError(f"JSBSim stopped flying {self.name} at t = {self.n * self.dt:.3f} s")
+            self.n += 1
+        self.t = t_end
+
+    def fly(
+        self,
+        T: float,
+        compensation: float,
+        effectiveness: float,
+        stuck_at: float | None,
+        f: Sequence[float] | np.ndarray,
+    ) -> None:
+        """Fly ``T`` seconds of the mission on the autopilot, with this compensation and these surface faults.
+
+        At every JSBSim step: the segment flown now and its PRBS level; the autopilot's step (aileron, rudder
+        and throttle written, its elevator returned); the servo's position, the autopilot's elevator plus
+        ``compensation``, clipped to the travel (or ``stuck_at`` while the surface is stuck); the surface,
+        ``effectiveness`` x that position + the additive fault ``f[0]``. A segment the aircraft cannot fly (a
+        stall, the throttle held at a stop) raises ``FlightModelError`` naming it.
+        """
+        pilot, timeline = self.autopilot, self.timeline
+        if pilot is None or timeline is None:
+            raise RuntimeError("fly() flies a mission: this aircraft has none")
+        t_end = self.t + T
+        n_end = int(math.floor(t_end / self.dt + 0.5))
+        bias = float(f[0]) if len(f) else 0.0
+        low, high = float(self._deg[0]), float(self._deg[-1])
+        self.compensation = float(compensation)
+        fdm = self.fdm
+        while self.n < n_end:
+            t = self.n * self.dt
+            segment, excitation = timeline.at(t)
+            own = pilot.step(fdm, segment.targets, excitation)
+            if pilot.trouble is not None:
+                what, why = pilot.trouble
+                raise FlightModelError(f"{self.name}: {what} in segment '{segment.name}' at t = {t:.1f} s: {why}")
+            self.servo_command = min(max(own + compensation, low), high)
+            self.servo = self.servo_command if stuck_at is None else stuck_at
+            surface = effectiveness * self.servo + bias
+            if surface != self.surface:
+                self._put(surface)
+            if not fdm.run():
+                raise FlightModelError(f"JSBSim stopped flying {self.name} at t = {t:.3f} s")
             self.n += 1
         self.t = t_end
 
@@ -389,6 +560,7 @@ class JSBSimFlightModel:
                 g("position/h-sl-meters"),
                 g("velocities/h-dot-fps") * FT_TO_M,
             ),
+            elevator_parts=None if self.autopilot is None else (self.autopilot.elevator_deg, self.compensation),
         )
 
     def disturbance(self) -> list[float]:
@@ -402,12 +574,36 @@ class JSBSimFlightModel:
 
     def truth_extras(self) -> dict:
         g = self.fdm.get_property_value
-        return {
+        extras = {
             "surface": g("fcs/elevator-pos-deg"),
             "trim": self.trim_deflection,
             "altitude_m": g("position/h-sl-meters"),
             "states": list(self.state_names),
         }
+        pilot, timeline = self.autopilot, self.timeline
+        if pilot is not None and timeline is not None:  # a mission: what it flies and how, in pilots' units
+            segment, excitation = timeline.at(self.t)
+            extras.update(
+                segment=segment.name,
+                airspeed_kt=g("velocities/vc-kts"),
+                load_factor=g("accelerations/Nz"),  # JSBSim's normal load factor (1 in level flight), not 1/cos
+                bank_deg=g("attitude/phi-deg"),
+                heading_deg=g("attitude/psi-deg"),
+                altitude_ft=g("position/h-sl-ft"),
+                climb_fpm=60.0 * g("velocities/h-dot-fps"),
+                throttle=pilot.throttle,
+                autopilot_elevator=pilot.elevator_deg,
+                compensation=self.compensation,
+                excitation=excitation,
+                reference={
+                    "airspeed_kt": pilot.airspeed_ref,
+                    "altitude_ft": pilot.altitude_ref,
+                    "climb_fpm": pilot.climb_ref,
+                    "bank_deg": pilot.bank_ref,
+                    "pitch_deg": pilot.pitch_cmd_deg,
+                },
+            )
+        return extras
 
     def close(self) -> None:
         self.fdm = None

@@ -27,6 +27,14 @@ h = 0.05 s) every drawn delay acts. A sample is settled (its truth published) on
 has passed; one never answered by then is lost. Each truth payload says which command was in force at its
 instant (``in_force``) and, for the sample's own command, when it acted (``tau``, which may exceed h).
 
+A mission (a JSBSim aircraft whose model carries one: ``--mission``). The aircraft's own autopilot flies it,
+elevator included, at every JSBSim step (``sim_vehicle/autopilot.py``); the servo is ``MissionServo``. A command
+from outside is then, with ``compensation``, an additive compensation in degrees: applied after its delay like any
+command (same late/stale rules), it is added to the autopilot's elevator from then on; without ``compensation``
+it is counted (``ignored_autopilot``) and ignored, and every sample is flown on board. The sample's
+ACTUATOR_OUTPUT_STATUS reports the whole deflection applied (``actuator[0]``), the autopilot's part
+(``actuator[1]``) and the compensation in force (``actuator[2]``).
+
 On-board commands. With ``autopilot`` (a gain K with u(k) = K y(k), linear plant only) the vehicle flies
 itself, as in an observe-only run; with ``excite`` (``--excite prbs:AMP:SECONDS``) it flies an identification
 manoeuvre, trim +- AMP, for SECONDS, then issues trim once and goes back to commands from outside. At sample
@@ -55,8 +63,8 @@ import numpy as np
 from monitor.model.plant import Plant
 from monitor.wire.specs import DelaySampler, Excitation, FaultSchedule, Wind, parse_delay_spec
 from monitor.wire.telemetry import AircraftSample, Sample
-from sim_vehicle.dynamics import Airframe, LinearFlightModel
-from sim_vehicle.flight_model import FlightModel, Outputs
+from sim_vehicle.dynamics import Airframe, LinearFlightModel, MissionServo
+from sim_vehicle.flight_model import FlightModel, Outputs, PilotedModel
 from sim_vehicle.network import DOWNLINK, UPLINK, Impairment
 from sim_vehicle.stats import RunStats
 
@@ -95,7 +103,10 @@ class SampleTruth:
 
     def payload(self, sysid: int, unit: str) -> dict:
         """The contract's truth payload plus extras (``status``, ``tau_drawn``, ``u``, ``elevator``, ...)."""
-        status = "applied" if self.tau is not None else ("late" if self.late else "lost")
+        if self.tau is not None:
+            status = "applied"
+        else:  # a mission flown on board without compensation: nobody was to answer, so nothing was lost
+            status = "late" if self.late else "onboard" if self.onboard else "lost"
         return {
             "sysid": sysid,
             "k": self.k,
@@ -136,6 +147,7 @@ class Simulation:
     stats: RunStats = field(default_factory=RunStats)
     model: FlightModel | None = None  # what flies (None: the linear plant of ``plant``)
     excite: Excitation | None = None  # an on-board identification manoeuvre at the start
+    compensation: bool = False  # a mission: commands from outside add to the autopilot's elevator (else ignored)
 
     def __post_init__(self) -> None:
         if self.model is None:
@@ -146,7 +158,15 @@ class Simulation:
             raise ValueError("the on-board autopilot u = K y needs the linear plant's C")
         self.h = self.model.h
         self.unit = self.model.unit
-        self.airframe = Airframe(self.model)
+        # an aircraft on a mission flies its own elevator: commands from outside are a compensation, or ignored
+        self.piloted = isinstance(self.model, PilotedModel) and self.model.piloted
+        if self.compensation and not self.piloted:
+            raise ValueError("compensation adds to an on-board autopilot's elevator: it needs an aircraft on a mission")
+        if self.piloted and (self.autopilot is not None or self.excite is not None):
+            raise ValueError("an aircraft on a mission is flown by its own autopilot: no autopilot gain, no excite")
+        self.airframe: Airframe | MissionServo = (
+            MissionServo(self.model) if isinstance(self.model, PilotedModel) and self.piloted else Airframe(self.model)
+        )
         self._queue: list[tuple[float, int, Callable, tuple]] = []
         self._seq = itertools.count()
         self._wind: Iterator[float] | None = self.wind.values() if self.model.n_wind else None
@@ -177,7 +197,7 @@ class Simulation:
         current simulated time, which is never behind the event loop).
         """
         self.stats.commands["received"] += 1
-        if self.autopilot is not None:
+        if self.autopilot is not None or (self.piloted and not self.compensation):
             return self._count("ignored_autopilot")
         if self._excite and k <= len(self._excite):
             return self._count("ignored_excitation")
@@ -258,6 +278,8 @@ class Simulation:
         if onboard is not None:
             reported = self._onboard(t, k, tau, onboard)
             truth.onboard = True
+        elif self.piloted and not self.compensation:
+            truth.onboard = True  # its own autopilot flies it and nobody answers: no sample is "in time" or "lost"
         sample = self._telemetry(k, t, measured, outputs, reported)
         fate = self.impairment.fate(UPLINK, k)
         if not fate:
@@ -298,6 +320,8 @@ class Simulation:
             airspeed_m_s=outputs.airspeed_m_s or 0.0,
             attitude=outputs.attitude or (0.0, 0.0, 0.0, 0.0),
             hud=outputs.hud or (0.0, 0.0, 0, 0.0, 0.0),
+            autopilot_elevator=outputs.elevator_parts[0] if outputs.elevator_parts else 0.0,
+            compensation=outputs.elevator_parts[1] if outputs.elevator_parts else 0.0,
         )
 
     def _measure(self, k: int, x: list[float]) -> list[float]:
