@@ -64,7 +64,7 @@ def _panel(
     series = stable or ([] if panel.truth else [getattr(t, panel.field) for t in runs.values()])
     if panel.truth:
         first = next(iter(runs.values()))
-        ax.step(first.k, first.f, where="post", color="black", lw=2.0, zorder=2, label="true fault f")
+        ax.step(np.asarray(first.k) * h, first.f, where="post", color="black", lw=2.0, zorder=2, label="true fault f")
         series.append(first.f)
     if panel.reference is not None:
         ax.axhline(panel.reference, color="black", ls=(0, (1, 3)), lw=1.2, zorder=2, label=panel.reference_label)
@@ -74,11 +74,20 @@ def _panel(
     every = max(3, len(runs), max(len(t.k) for t in runs.values()) // 80)
     for i, (name, t) in enumerate(runs.items()):
         y = getattr(t, panel.field)
-        left = bool(np.any(~np.isfinite(y)) or np.any((y < lo) | (y > hi)))
+        x = np.asarray(t.k) * h  # seconds: what a flight-control engineer reads
+        outside = ~np.isfinite(y) | (y < lo) | (y > hi)
+        left = bool(np.any(outside))
         faint = name in unstable  # drawn underneath, so the stable designs stay readable
         style = look(name)
+        if left:
+            # a run that leaves the axes is drawn up to where it leaves them, and that point is marked: clipped
+            # on for the rest of the run, a diverging oscillation painted a band over the whole plot
+            exit_at = int(np.argmax(outside))
+            kept = np.nan_to_num(y[: exit_at + 1], nan=hi, posinf=hi, neginf=lo)
+            x, y = x[: exit_at + 1], np.clip(kept, lo, hi)
+            ax.plot(x[-1:], y[-1:], marker="x", ms=8, color=style.colour, zorder=4, ls="")
         ax.plot(
-            t.k,
+            x,
             np.clip(y, lo, hi),
             color=style.colour,
             ls=style.line,
@@ -88,7 +97,7 @@ def _panel(
             markevery=(i % every, every),
             alpha=0.45 if faint else 1.0,
             zorder=1 if faint else 3,
-            label=f"{name}{f' ({clipped_note})' if left else ''}",
+            label=f"{name}{f' ({clipped_note}, leaves the axes at x)' if left else ''}",
         )
     for name in failed:
         style = look(name)
@@ -103,10 +112,10 @@ def _panel(
             label=f"{name} (design failed: not run)",
         )
     if onset is not None:
-        ax.axvline(onset, color="grey", ls="--", lw=1)
+        ax.axvline(onset * h, color="grey", ls="--", lw=1)
         ax.annotate(
-            f"fault onset k = {onset}",
-            (onset, hi),
+            f"fault onset t = {onset * h:g} s (k = {onset})",
+            (onset * h, hi),
             xytext=(4, -14),
             textcoords="offset points",
             fontsize=8,
@@ -114,7 +123,7 @@ def _panel(
         )
     ax.set_ylim(lo, hi)
     if xlabel:
-        ax.set_xlabel(f"sample k (h = {h:g} s)")
+        ax.set_xlabel(f"time t = k h (s), h = {h:g} s")
     ax.set_ylabel(panel.ylabel)
     ax.set_title(title)
     ax.grid(alpha=0.3)
@@ -218,6 +227,16 @@ def write_figures(
     return paths
 
 
+def _unit_suffix(state: str) -> str:
+    """``", deg"`` for a state the contract's sample defines (its unit there), else nothing."""
+    from monitor.wire.telemetry import field_of
+
+    try:
+        return f", {field_of(state).unit}"
+    except KeyError:
+        return ""
+
+
 def write_identification_figure(
     runs: dict[str, dict[str, np.ndarray]],
     names: dict[str, tuple[str, ...]],
@@ -257,7 +276,7 @@ def write_identification_figure(
                 lw=1.2,
                 label=f"{model} model, fit {fits[model][state]:.1f} %",
             )
-        ax.set_ylabel(f"{state} (deviation)")
+        ax.set_ylabel(f"{state} (deviation{_unit_suffix(state)})")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     axes[-1, 0].set_xlabel("time in the flight (s)")
