@@ -198,7 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--compensation",
         action="store_true",
         help="with --mission: an elevator command received (SET_ACTUATOR_CONTROL_TARGET, after its delay) is a "
-        "compensation in degrees added to the autopilot's elevator (default: commands from outside are ignored)",
+        "compensation in degrees added to the autopilot's elevator; without it commands from outside are ignored",
     )
     n = run.add_argument_group("network (emulated on top of the real UDP path)")
     n.add_argument(
