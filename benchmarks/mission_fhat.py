@@ -9,8 +9,10 @@ It starts ``sim-vehicle run --aircraft A --mission M`` (the vehicle's own autopi
 ``fault-monitor run --observe`` with the plant and gains given (one trim point, or an envelope once the monitor
 schedules one) on loopback, reads the monitor's recording and the vehicle's truth, and prints per segment: the
 largest |f_hat|, the largest |f_hat - f| (with a fault), the bank and airspeed flown, and whether an alarm
-was raised at the default threshold (1 deg). Why observe-only: the autopilot flies, as in a real flight; the
-monitor only watches.
+was raised at the default threshold (1 deg), and the largest altitude and airspeed deviations from the
+autopilot's references. ``--compensate``: the monitor sends the fault compensation and the vehicle adds it to
+its autopilot's elevator (otherwise the monitor only observes). Why observe-only by default: the autopilot
+flies, as in a real flight; the monitor only watches.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ def fly(args: argparse.Namespace, work: Path) -> tuple[Path, Path]:
         "-m",
         "monitor",
         "run",
-        "--observe",
+        "--compensate" if args.compensate else "--observe",
         "--plant",
         args.plant,
         "--gains",
@@ -75,6 +77,8 @@ def fly(args: argparse.Namespace, work: Path) -> tuple[Path, Path]:
     ]
     if args.fault:
         vehicle_cmd += ["--fault", args.fault]
+    if args.compensate:
+        vehicle_cmd += ["--compensation"]
     if args.turbulence:
         vehicle_cmd += ["--turbulence", args.turbulence]
     with open(work / "monitor.log", "w") as mlog:
@@ -104,7 +108,17 @@ def table(rrd: Path, truth_path: Path, threshold: float) -> list[dict]:
         d = json.loads(line)
         truth[d["k"]] = d
     rows: dict[str, dict] = defaultdict(
-        lambda: {"n": 0, "max_fhat": 0.0, "max_err": 0.0, "bank": 0.0, "v_min": 1e9, "v_max": 0.0, "alarm": False}
+        lambda: {
+            "n": 0,
+            "max_fhat": 0.0,
+            "max_err": 0.0,
+            "bank": 0.0,
+            "v_min": 1e9,
+            "v_max": 0.0,
+            "alarm": False,
+            "alt_dev": 0.0,
+            "v_dev": 0.0,
+        }
     )
     order: list[str] = []
     for k, d in sorted(truth.items()):
@@ -122,6 +136,11 @@ def table(rrd: Path, truth_path: Path, threshold: float) -> list[dict]:
         r["v_min"] = min(r["v_min"], d.get("airspeed_kt", 0.0))
         r["v_max"] = max(r["v_max"], d.get("airspeed_kt", 0.0))
         r["alarm"] = r["alarm"] or abs(f_hat[k]) > threshold
+        ref = d.get("reference") or {}
+        if "altitude_ft" in d and ref.get("altitude_ft") is not None:
+            r["alt_dev"] = max(r["alt_dev"], abs(d["altitude_ft"] - ref["altitude_ft"]))
+        if "airspeed_kt" in d and ref.get("airspeed_kt") is not None:
+            r["v_dev"] = max(r["v_dev"], abs(d["airspeed_kt"] - ref["airspeed_kt"]))
     return [{"segment": s, **rows[s]} for s in order]
 
 
@@ -136,15 +155,25 @@ def main() -> int:
     p.add_argument("--turbulence", default=None)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threshold", type=float, default=1.0)
+    p.add_argument(
+        "--compensate",
+        action="store_true",
+        help="the monitor sends the fault compensation (run --compensate) and the vehicle adds it to its "
+        "autopilot's elevator (sim-vehicle --compensation)",
+    )
     args = p.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         rrd, truth = fly(args, Path(tmp))
         rows = table(rrd, truth, args.threshold)
-    print(f"{'segment':<16} {'samples':>7} {'bank deg':>8} {'kt min-max':>11} {'max|f_hat|':>10} {'max|e_f|':>9} alarm")
+    print(
+        f"{'segment':<16} {'samples':>7} {'bank deg':>8} {'kt min-max':>11} {'max|f_hat|':>10} {'max|e_f|':>9} "
+        f"{'alt dev ft':>10} {'V dev kt':>8} alarm"
+    )
     for r in rows:
         print(
             f"{r['segment']:<16} {r['n']:>7} {r['bank']:>8.1f} {r['v_min']:>5.0f}-{r['v_max']:<5.0f} "
-            f"{r['max_fhat']:>10.2f} {r['max_err']:>9.2f} {'ALARM' if r['alarm'] else ''}"
+            f"{r['max_fhat']:>10.2f} {r['max_err']:>9.2f} {r['alt_dev']:>10.1f} {r['v_dev']:>8.1f} "
+            f"{'ALARM' if r['alarm'] else ''}"
         )
     return 0
 
