@@ -25,6 +25,7 @@ COMMANDS = (
     "run",
     "analyse",
     "identify",
+    "envelope",
     "subscribe",
     "replay",
     "router",

@@ -3,6 +3,8 @@
 One module per method so a new method is a new file, not a branch in an old one. ``certified`` has two
 objectives: ``fast`` (default, ``monitor.design.fast``) and ``hinf`` (the joint H-infinity design,
 ``monitor.design.certified``); both end with a common-Lyapunov certificate over the delay interval.
+``monitor.design.envelope`` runs any of them at each point of an envelope (several operating points) and then
+certifies the points together, with one Lyapunov matrix for every point's loop.
 """
 
 from __future__ import annotations

@@ -11,7 +11,8 @@ A plant file is TOML in one of two forms (docs/reference/file-formats.md):
 Why be strict: a silently ignored typo in a key (``tau_mx``) would design for the wrong plant, so every
 unknown key, wrong shape, non-finite number or negative delay is a one-line ``UserError`` naming the key
 and the file. A delay interval that reaches past h gives a plant with the commands in flight in its state
-(``Lags``, ``monitor.model.long_delay``).
+(``Lags``, ``monitor.model.long_delay``). An envelope file (``form = "envelope"``, several operating points:
+``monitor.model.envelope``) is refused here with a line that says so; its points are read by this module.
 """
 
 from __future__ import annotations
@@ -212,6 +213,11 @@ def with_tau_max(plant: Plant, tau_max: float) -> Plant:
 def plant_from_table(raw: dict[str, Any], source: str) -> Plant:
     """Validate a parsed plant table (see the module docstring) and build the Plant."""
     form = raw.get("form")
+    if form == "envelope":
+        raise UserError(
+            f'{source}: is an envelope plant file (form = "envelope": the plant at several operating points); '
+            "design and verify take it, this command takes a single-point plant file"
+        )
     if form not in ("continuous", "discrete"):
         raise UserError(f'{source}: key \'form\' must be "continuous" or "discrete", got {form!r}')
     allowed = _CONTINUOUS_KEYS if form == "continuous" else _DISCRETE_KEYS
