@@ -380,3 +380,34 @@ def test_air_only_keeps_the_model_and_measures_the_gust_of_another_log(c172p_fli
         str(c172p_flight["log"]), "--air-only", str(tmp_path / "none.toml"), "--out", str(tmp_path / "x.toml")
     )
     assert code == 2 and len(stderr.strip().splitlines()) == 1, stderr
+
+
+def test_a_window_identifies_one_leg_of_the_log(c172p_flight, tmp_path: Path) -> None:
+    """--window START:END: the samples from START to END s after the first one (a mission's identification leg)."""
+    log = str(c172p_flight["log"])
+    whole, leg, wide = tmp_path / "whole.toml", tmp_path / "leg.toml", tmp_path / "wide.toml"
+    assert _identify(log, "--out", str(whole))[0] == 0
+    assert _identify(log, "--out", str(wide), "--window", "0:1000")[0] == 0
+    code, _out, stderr = _identify(log, "--out", str(leg), "--window", "0:40", "--json")
+    assert code == 0, stderr
+    a_whole, a_wide, a_leg = (np.array(load_plant(str(p)).raw["A_c"]) for p in (whole, wide, leg))
+    assert np.array_equal(a_whole, a_wide)  # a window past both ends is the whole log
+    assert not np.allclose(a_whole, a_leg)  # the leg was fitted on its own samples: another estimate
+    n_leg = json.loads(_out)["samples"]["log"]
+    assert n_leg == 800  # 40 s at 20 Hz of a 65 s log
+    assert json.loads(_identify(log, "--out", str(whole), "--json")[1])["samples"]["log"] == 1300
+
+
+@pytest.mark.parametrize(
+    "window, message",
+    [
+        ("0:4", "no excitation"),  # the quiet lead-in alone
+        ("500:600", "--window 500:600 s holds no sample of sysid 1 (its samples span 0-"),
+        ("5:3", "--window START:END needs 0 <= START < END seconds, got 5:3"),
+    ],
+)
+def test_a_window_without_a_leg_is_one_line(c172p_flight, tmp_path: Path, window: str, message: str) -> None:
+    code, stdout, stderr = _identify(str(c172p_flight["log"]), "--out", str(tmp_path / "p.toml"), "--window", window)
+    lines = stderr.strip().splitlines()
+    assert code == 2 and stdout == "" and len(lines) == 1 and message in lines[0], stderr
+    assert not (tmp_path / "p.toml").exists()

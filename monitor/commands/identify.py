@@ -100,8 +100,27 @@ def register(subparsers) -> None:
     )
     p.add_argument("--sysid", type=int, metavar="N", help="the vehicle to identify (needed when the log holds several)")
     p.add_argument("--name", help="the plant's name (default: the output file's stem)")
+    p.add_argument(
+        "--window",
+        metavar="START:END",
+        type=_window,
+        help="identify from one leg of a longer flight: the samples from START to END seconds after the vehicle's "
+        "first one (a mission's identification leg at one operating point; fault-monitor envelope assembles the "
+        "plants of several legs); default: the whole log",
+    )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=run)
+
+
+def _window(text: str) -> tuple[float, float]:
+    """``START:END`` in seconds (argparse turns a ValueError into its one-line usage error)."""
+    start, sep, end = text.partition(":")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"expected START:END in seconds, got {text!r}")
+    try:
+        return float(start), float(end)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected START:END in seconds, got {text!r}") from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -118,6 +137,7 @@ def run(args: argparse.Namespace) -> int:
         signals=args.signals,
         sysid=args.sysid,
         name=args.name,
+        window=args.window,
     )
     done = identify_log(req, say=lambda text: print(f"identify: {text}", file=sys.stderr, flush=True))
     if args.json:

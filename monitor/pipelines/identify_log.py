@@ -154,6 +154,9 @@ class IdentifyRequest:
     signals: str | None = None
     sysid: int | None = None
     name: str | None = None
+    # (start, end) in seconds from the vehicle's first sample in the log: one leg of a longer flight (a mission's
+    # identification leg at one airspeed); None: the whole log
+    window: tuple[float, float] | None = None
 
     @property
     def plant_name(self) -> str:
@@ -202,6 +205,25 @@ class IdentifiedLog:
         }
 
 
+def _within(rows: Rows, window: tuple[float, float], h_read: float, log: str, sysid: int) -> Rows:
+    """The samples of ``rows`` from ``start`` to ``end`` seconds after the vehicle's first one (a leg of a flight).
+
+    Why seconds from the first sample and not the log's clock: a telemetry log's instants are the vehicle's
+    boot-relative stamps, which a user reads off a plot of the flight as "the leg from 300 s to 360 s".
+    """
+    from monitor.errors import UserError
+
+    start, end = window
+    k0 = rows[0][0]
+    kept = [r for r in rows if start <= (r[0] - k0) * h_read < end]
+    span = (rows[-1][0] - k0) * h_read
+    if not kept:
+        raise UserError(
+            f"{log}: --window {start:g}:{end:g} s holds no sample of sysid {sysid} (its samples span 0-{span:.1f} s)"
+        )
+    return kept
+
+
 def _checked(req: IdentifyRequest) -> None:
     from monitor.errors import UserError
 
@@ -215,6 +237,10 @@ def _checked(req: IdentifyRequest) -> None:
         raise UserError(f"--actuator-limit must be a positive number of degrees, got {req.actuator_limit}")
     if req.turbulence is not None and req.turbulence not in TURBULENCE_LEVELS:
         raise UserError(f"--turbulence must be one of {', '.join(TURBULENCE_LEVELS)}, got {req.turbulence!r}")
+    if req.window is not None:
+        start, end = req.window
+        if not (math.isfinite(start) and math.isfinite(end) and 0 <= start < end):
+            raise UserError(f"--window START:END needs 0 <= START < END seconds, got {start:g}:{end:g}")
 
 
 def _periods(req: IdentifyRequest, smap, dlog=None) -> tuple[float, int, float]:
@@ -324,6 +350,8 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
             f"{req.log}: no sample of sysid {sysid} could be assembled: "
             + why_no_samples(flight.inventory, smap, (*states, *smap.actuator), sysid, h_read)
         )
+    if req.window is not None:
+        rows = _within(rows, req.window, h_read, req.log, sysid)
     actuator = written["actuator"][0]
     if ratio > 1:
         rows = _decimate(rows, ratio, actuator)
