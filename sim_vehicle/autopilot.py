@@ -192,6 +192,7 @@ class Autopilot:
         self._throttle_i = 0.0
         self._altitude_i = 0.0
         self._pitch_i = 0.0
+        self._held: tuple[float, float] | None = None  # (elevator deg, throttle) held through an excite leg
         # what the watch has seen
         self._stalled_s = 0.0
         self._stop_s = 0.0
@@ -201,8 +202,19 @@ class Autopilot:
         self.throttle = trim.throttle
         self.pitch_cmd_deg = trim.theta_deg
 
-    def step(self, fdm: Properties, targets: Targets, excitation_deg: float = 0.0) -> float:
-        """One JSBSim step: shape the references, run the loops, write aileron/rudder/throttle; the elevator (deg)."""
+    def step(self, fdm: Properties, targets: Targets, excitation_deg: float = 0.0, hold: bool = False) -> float:
+        """One JSBSim step: shape the references, run the loops, write aileron/rudder/throttle; the elevator (deg).
+
+        ``hold`` (an identification leg, one with ``excite``): the throttle and the elevator stay where they were
+        when the leg began and the PRBS is added to that elevator, while the lateral loops keep the wings level,
+        as a test pilot holds stick and throttle through an identification manoeuvre. Why: with the pitch and
+        airspeed loops closed, the throttle answers the PRBS, an input the identified model does not have (on
+        c172p the one-trim model then read 1.9 deg of fault in the leg), and the loops filter the excitation.
+        """
+        if hold and self._held is None:
+            self._held = (self.elevator_deg, self.throttle)
+        elif not hold:
+            self._held = None
         g, dt = self.gains, self.dt
         phi, theta, psi = fdm["attitude/phi-deg"], fdm["attitude/theta-deg"], fdm["attitude/psi-deg"]
         p = math.degrees(fdm["velocities/p-rad_sec"])
@@ -250,7 +262,7 @@ class Autopilot:
         ramping = self.airspeed_ref != targets.airspeed_kt
         if not ramping and (0.0 < throttle < 1.0 or (throttle >= 1.0) != (speed_error > 0)):
             self._throttle_i += g.speed_i * speed_error * dt
-        self.throttle = _clip(throttle, 0.0, 1.0)
+        self.throttle = _clip(throttle, 0.0, 1.0) if self._held is None else self._held[1]
         for name in self.throttles:
             fdm[name] = self.throttle
 
@@ -275,6 +287,8 @@ class Autopilot:
         # positive elevator pitches the nose down: a positive attitude error asks for less elevator
         if self.low < elevator < self.high or (elevator <= self.low) != (pitch_error > 0):
             self._pitch_i += schedule * g.pitch_i * pitch_error * dt
+        if self._held is not None:
+            elevator = self._held[0]
         self.elevator_deg = _clip(elevator + excitation_deg, self.low, self.high)
 
         self._watch(fdm["aero/alpha-deg"], airspeed, targets, ramping)

@@ -383,6 +383,7 @@ class JSBSimFlightModel:
         self.timeline: Timeline | None = None
         self.servo = self.trim_deflection  # the servo's position: autopilot + compensation, clipped (or stuck)
         self.servo_command = self.trim_deflection  # the same before a stuck surface held it
+        self._own: float | None = None  # the autopilot's elevator for the step under way (deg); None: not yet
         self.compensation = 0.0  # the compensation in force (deg), set by the servo when a command acts
         self.stall_alpha_deg = DEFAULT_STALL_ALPHA_DEG
         if spec.mission is not None:
@@ -499,25 +500,46 @@ class JSBSimFlightModel:
         t_end = self.t + T
         n_end = int(math.floor(t_end / self.dt + 0.5))
         bias = float(f[0]) if len(f) else 0.0
-        low, high = float(self._deg[0]), float(self._deg[-1])
         self.compensation = float(compensation)
         fdm = self.fdm
+        if self._own is None:
+            self._decide()
+        self._apply(effectiveness, stuck_at, bias)  # this call's compensation and faults, from its first step
         while self.n < n_end:
-            t = self.n * self.dt
-            segment, excitation = timeline.at(t)
-            own = pilot.step(fdm, segment.targets, excitation)
-            if pilot.trouble is not None:
-                what, why = pilot.trouble
-                raise FlightModelError(f"{self.name}: {what} in segment '{segment.name}' at t = {t:.1f} s: {why}")
-            self.servo_command = min(max(own + compensation, low), high)
-            self.servo = self.servo_command if stuck_at is None else stuck_at
-            surface = effectiveness * self.servo + bias
-            if surface != self.surface:
-                self._put(surface)
             if not fdm.run():
-                raise FlightModelError(f"JSBSim stopped flying {self.name} at t = {t:.3f} s")
+                raise FlightModelError(f"JSBSim stopped flying {self.name} at t = {self.n * self.dt:.3f} s")
             self.n += 1
+            self._decide()
+            self._apply(effectiveness, stuck_at, bias)
         self.t = t_end
+
+    def _decide(self) -> None:
+        """The autopilot's decision for the step that starts now (``n dt``), from the state JSBSim is in now.
+
+        Why decided at the end of the previous step and not at the start of the next: a sampling instant k h is a
+        step boundary, and the sample taken there reports the deflection the vehicle applies from that instant,
+        its own controller's u(k), as the observe-only contract says. Decided one step later, the report carried
+        the deflection of the step before the instant: every PRBS switch then reached the monitor one sample late
+        and read as a fault the size of the switch (2 deg on c172p).
+        """
+        pilot, timeline = self.autopilot, self.timeline
+        assert pilot is not None and timeline is not None  # fly() checked
+        t = self.n * self.dt
+        segment, excitation = timeline.at(t)
+        self._own = pilot.step(self.fdm, segment.targets, excitation, hold=segment.excite is not None)
+        if pilot.trouble is not None:
+            what, why = pilot.trouble
+            raise FlightModelError(f"{self.name}: {what} in segment '{segment.name}' at t = {t:.1f} s: {why}")
+
+    def _apply(self, effectiveness: float, stuck_at: float | None, bias: float) -> None:
+        """The servo (the autopilot's elevator plus the compensation, within the travel, or stuck) and the surface."""
+        assert self._own is not None
+        low, high = float(self._deg[0]), float(self._deg[-1])
+        self.servo_command = min(max(self._own + self.compensation, low), high)
+        self.servo = self.servo_command if stuck_at is None else stuck_at
+        surface = effectiveness * self.servo + bias
+        if surface != self.surface:
+            self._put(surface)
 
     def _put(self, surface: float) -> None:
         self.surface = surface
@@ -575,7 +597,9 @@ class JSBSimFlightModel:
     def truth_extras(self) -> dict:
         g = self.fdm.get_property_value
         extras = {
-            "surface": g("fcs/elevator-pos-deg"),
+            # a mission decides the surface for the step that starts at the instant (``_decide``): that one acts
+            # from now, where JSBSim's own read-back still shows the step before
+            "surface": self.surface if self.autopilot is not None else g("fcs/elevator-pos-deg"),
             "trim": self.trim_deflection,
             "altitude_m": g("position/h-sl-meters"),
             "states": list(self.state_names),

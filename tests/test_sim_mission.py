@@ -330,3 +330,20 @@ def test_a_mission_sample_carries_the_attitude_rates_throttle_altitude_and_climb
     assert abs(have["throttle"] - 100 * truth["throttle"]) <= 1.0  # VFR_HUD carries whole percent
     assert truth["segment"] == "turn" and truth["reference"]["bank_deg"] == pytest.approx(30.0)
     assert {"airspeed_kt", "load_factor", "bank_deg", "altitude_ft", "autopilot_elevator", "compensation"} <= set(truth)
+
+
+def test_an_identification_leg_holds_stick_and_throttle_and_reports_each_prbs_switch_at_its_instant() -> None:
+    """The sample at k reports the deflection applied from k h: the held elevator plus the PRBS level of k (a report
+    one step late carried each switch to the monitor a sample late, which read it as a fault of the switch's size)."""
+    plan = mission(segment("level", 2, 100), segment("prbs", 6, 100, excite="prbs:1:5"))
+    sim, rec, stopped = fly("c172p", plan)
+    assert stopped is None
+    leg = [(s, t) for s, t in zip(rec.samples, rec.truth, strict=True) if t["segment"] == "prbs"]
+    first_sample, first_truth = leg[0]
+    held = first_sample.autopilot_elevator - first_truth["excitation"]
+    levels = {t["excitation"] for _s, t in leg}
+    assert levels >= {1.0, -1.0}  # the PRBS switched within the leg
+    for s, t in leg:
+        assert s.autopilot_elevator == pytest.approx(held + t["excitation"], abs=1e-9), s.k
+        assert s.elevator_deg == pytest.approx(s.autopilot_elevator, abs=1e-9)  # no compensation: the report is it
+        assert t["throttle"] == pytest.approx(first_truth["throttle"], abs=1e-12)  # the throttle held
