@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
 
     from monitor import __version__
     from monitor.commands.replay import format_report
-    from monitor.commands.run import alarm_from_args, load_models
+    from monitor.commands.run import alarm_from_args, load_models, model_properties
     from monitor.errors import UserError
     from monitor.scoring import score_recording
     from monitor.service.offline import analyse_log
@@ -64,19 +64,15 @@ def run(args: argparse.Namespace) -> int:
     fleet = load_models(args, layouts=dlog.layouts if dlog is not None else None)
     alarm = alarm_from_args(args, fleet)
     model = fleet.default
+    described = model_properties(model, str(args.gains))
     properties = {
         "monitor_version": __version__,
         "mode": "observe (analyse)",
         "source_log": str(args.tlog),
-        "plant": model.plant.name,
-        "plant_hash": model.plant.digest,
-        "gains": str(args.gains),
-        "gains_method": model.gains.method,
-        "signals": model.signals.describe(),
+        **{k: described[k] for k in ("plant", "plant_hash", "gains", "gains_method", "signals")},
         "alarm": f"threshold={alarm.threshold} clear={alarm.clear} samples={alarm.samples}",
+        **{k: v for k, v in described.items() if k == "operating_point" or k.startswith("envelope")},
     }
-    if model.signals.operating_point is not None:  # y, x_hat, u, residual in the recording are deviations from it
-        properties["operating_point"] = json.dumps(model.signals.operating_point)
     recorder = None
     if args.rrd:
         from monitor.service.recorder import RrdRecorder
@@ -113,10 +109,11 @@ def run(args: argparse.Namespace) -> int:
         from monitor.link.log_inventory import why_no_samples
 
         sig = model.signals
+        schedule = model.envelope.envelope.schedule if model.envelope is not None else ()
+        names = tuple(dict.fromkeys((*sig.outputs, *sig.actuator, *schedule)))
         raise UserError(
             f"{args.tlog}: no sample could be assembled from {result.log_records} log records "
-            f"({inventory.describe()}); "
-            + why_no_samples(inventory, sig, (*sig.outputs, *sig.actuator), args.sysid, model.plant.h)
+            f"({inventory.describe()}); " + why_no_samples(inventory, sig, names, args.sysid, model.plant.h)
         )
     recording = Recording(
         path=Path(args.rrd or args.tlog),
@@ -134,6 +131,10 @@ def run(args: argparse.Namespace) -> int:
         **result.counts,
         "inventory": inventory.as_dict(),
     }
+    if model.envelope is not None:
+        from monitor.service.offline import envelope_report
+
+        report["envelope"] = envelope_report(model.envelope, result.records)
     if args.json:
         print(json.dumps(report))
     else:
@@ -146,4 +147,9 @@ def run(args: argparse.Namespace) -> int:
         )
         for line in inventory.lines():
             print(f"log holds: {line}")
+        if "envelope" in report:
+            from monitor.service.offline import envelope_lines
+
+            for line in envelope_lines(report["envelope"]):
+                print(line)
     return 0

@@ -7,7 +7,42 @@ import argparse
 from monitor.checks import AUTO_MARGIN  # a constant of the light package module (no numpy at --help)
 from monitor.wire import TURBULENCE_LEVELS
 
-__all__ = ["register", "add_model_arguments", "load_models", "add_alarm_arguments", "alarm_from_args"]
+__all__ = [
+    "register",
+    "add_model_arguments",
+    "load_models",
+    "add_alarm_arguments",
+    "alarm_from_args",
+    "model_properties",
+]
+
+
+def model_properties(model, gains: str) -> dict[str, str]:
+    """The recording's properties for the model that serves the vehicles (``run``'s default, ``analyse``'s)."""
+    import json
+
+    if model.envelope is not None:
+        from monitor.service.rrd_stream import envelope_properties
+
+        return {
+            "plant": model.name,
+            "plant_hash": model.digest,
+            "gains": gains,
+            "gains_method": str(model.envelope.gains.meta.get("method", "unknown")),
+            "signals": model.signals.describe(),
+            **envelope_properties(model.envelope),
+        }
+    out = {
+        "plant": model.plant.name,
+        "plant_hash": model.plant.digest,
+        "gains": gains,
+        "gains_method": model.gains.method,
+        "signals": model.signals.describe(),
+        **{f"gain_{n}": str(getattr(model.gains.gains, n).tolist()) for n in ("L", "M", "K1", "K2", "K3")},
+    }
+    if model.signals.operating_point is not None:  # y, x_hat, u, residual in the recording are deviations from it
+        out["operating_point"] = json.dumps(model.signals.operating_point)
+    return out
 
 
 def add_model_arguments(p: argparse.ArgumentParser, fleet: bool = True) -> None:
@@ -15,10 +50,15 @@ def add_model_arguments(p: argparse.ArgumentParser, fleet: bool = True) -> None:
     p.add_argument(
         "--plant",
         metavar="P",
-        help="plant preset (paper, paper-continuous) or plant TOML file"
+        help="plant preset (paper, paper-continuous) or plant TOML file, or an envelope plant file (form = "
+        '"envelope": the point is picked per sample from the measured schedule signals)'
         + (": the default model for every vehicle the fleet file does not list" if fleet else ""),
     )
-    p.add_argument("--gains", metavar="GAINS.toml", help="gains file for --plant (from fault-monitor design)")
+    p.add_argument(
+        "--gains",
+        metavar="GAINS.toml",
+        help="gains file for --plant (from fault-monitor design; an envelope's gains file for an envelope plant)",
+    )
     p.add_argument(
         "--signals",
         metavar="FILE",
@@ -121,7 +161,7 @@ def alarm_from_args(args: argparse.Namespace, fleet=None):
             )
         from monitor.checks.detectability import turbulence_threshold
 
-        models = fleet.models() if fleet else []
+        models = [p for m in fleet.models() for p in m.point_models()] if fleet else []  # an envelope: every point
         if not models:
             raise UserError("--alarm-threshold auto needs the vehicles' plant and gains")
         threshold = max(
@@ -144,7 +184,9 @@ def alarm_from_args(args: argparse.Namespace, fleet=None):
         from monitor.checks.threshold import fault_threshold
 
         bounds = [
-            fault_threshold(m.plant, m.gains.gains, args.disturbance_bound) for m in (fleet.models() if fleet else [])
+            fault_threshold(p.plant, p.gains.gains, args.disturbance_bound)
+            for m in (fleet.models() if fleet else [])
+            for p in m.point_models()
         ]
         if not bounds:
             raise UserError("--alarm-threshold auto needs the vehicles' plant and gains")
@@ -346,18 +388,7 @@ def run(args: argparse.Namespace) -> int:
     }
     default = fleet.default
     if default is not None:
-        properties.update(
-            plant=default.plant.name,
-            plant_hash=default.plant.digest,
-            gains=str(args.gains),
-            gains_method=default.gains.method,
-            signals=default.signals.describe(),
-            **{f"gain_{n}": str(getattr(default.gains.gains, n).tolist()) for n in ("L", "M", "K1", "K2", "K3")},
-        )
-        if default.signals.operating_point is not None:  # y, x_hat, u, residual in the recording are deviations from it
-            import json
-
-            properties["operating_point"] = json.dumps(default.signals.operating_point)
+        properties.update(model_properties(default, str(args.gains)))
     if args.fleet:
         properties["fleet"] = str(args.fleet)
     config = MonitorConfig(

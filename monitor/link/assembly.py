@@ -28,7 +28,9 @@ one (within h/5) moves it 1/4 of the way to its own offset ``t - k h``. So, at h
 
 When a sample is processed:
 * as soon as the parts the estimator needs are in hand (the instant message and the messages of every
-  output; in observe-only mode also the actuator report, which carries u(k));
+  output; in observe-only mode also the actuator report, which carries u(k); and the signals named in ``needs``,
+  which an envelope's scheduler reads to pick its point: a schedule signal that is not an output is needed as
+  an output is, timed or a latest value, so that no sample goes to the estimator without it);
 * in a monitor-controlled loop the actuator report (the deflection in force, u(k-1) of eqs. 5-6) is
   worth a short wait once the vehicle has been seen to send it: up to ``wait_s`` after the rest is in
   hand, then the sample goes without it (the estimator falls back on the monitor's own last command).
@@ -111,8 +113,15 @@ class SampleAssembler:
     """The parts of one vehicle's samples; ``add`` and ``poll`` return the samples ready, oldest first."""
 
     def __init__(
-        self, signals: SignalMap, h: float, observe: bool = False, wait_s: float = 0.02, max_pending: int = 16
+        self,
+        signals: SignalMap,
+        h: float,
+        observe: bool = False,
+        wait_s: float = 0.02,
+        max_pending: int = 16,
+        needs: tuple[str, ...] = (),
     ) -> None:
+        """``needs``: measured signals a sample cannot go without besides the outputs (an envelope's schedule)."""
         self.signals = signals
         self.h_us = h * 1e6
         self.observe = observe
@@ -136,9 +145,13 @@ class SampleAssembler:
             self._parts[sig.message] = (t_pos, unit_us, wrap, prev[3] + ((name, sig.position, sig.scale, sig.offset),))
         if signals.instant not in self._parts:
             self._parts[signals.instant] = (*_time_field(signals, signals.instant), ())
-        self.required = frozenset(m for m in signals.messages(observe) if m in self._parts)  # the timed ones
+        extra = [n for n in needs if n not in signals.outputs]
+        self.needed_messages = tuple(dict.fromkeys(signals.measured[n].message for n in extra))
+        wanted = (*signals.messages(observe), *self.needed_messages)
+        self.required = frozenset(m for m in wanted if m in self._parts)  # the timed ones
         self._hold_us = {e[0]: e[4] for entries in self._held_parts.values() for e in entries}
-        self._held_outputs = tuple(n for n in signals.outputs if n in self._hold_us)  # the estimator needs these
+        # the latest values the estimator (and the scheduler) need
+        self._held_outputs = tuple(n for n in (*signals.outputs, *extra) if n in self._hold_us)
         self._held: dict[str, tuple[float, int | None]] = {}  # name -> (latest value, its stamp in us)
         self._latest_us: int | None = None  # the newest instant of any timed part accepted
         self._pending: dict[int, _Slot] = {}

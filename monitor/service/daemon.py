@@ -113,13 +113,15 @@ def _recording_outputs(config: MonitorConfig) -> str:
 
 
 def _operating_points(config: MonitorConfig) -> str:
-    """The ready line's last part: the operating point of each model that has one (plants from ``identify``)."""
-    models = [m for m in config.fleet.models() if m.signals.operating_point is not None]
-    if not models:
-        return ""
-    if len(config.fleet.models()) == 1:
-        return f"; {models[0].signals.describe_operating_point()}"
-    return "".join(f"; plant {m.plant.name}: {m.signals.describe_operating_point()}" for m in models)
+    """The ready line's last part: the operating point of each model that has one (plants from ``identify``), and
+    an envelope's name, schedule and points."""
+    models = config.fleet.models()
+    parts = []
+    for m in models:
+        text = m.envelope.describe() if m.envelope is not None else m.signals.describe_operating_point()
+        if text is not None:
+            parts.append(text if len(models) == 1 else f"plant {m.name}: {text}")
+    return "".join(f"; {part}" for part in parts)
 
 
 def _live_urls(config: MonitorConfig) -> list[str]:

@@ -1,10 +1,16 @@
 """Fleet and model files: which plant, gains and signal map serve a system id.
 
 A model is a plant, its gains (cross-checked against the plant's hash), its signal map and the estimator
-built from them. The fleet config is TOML, one ``[vehicle.<sysid>]`` table each with ``plant``, ``gains``
-and optionally ``signals``; a system id it does not list gets the default ``--plant``/``--gains`` model, if
-any. ``load_model`` loads one model, ``load_fleet`` a fleet file of them; the vehicle table
-(``monitor.service.vehicles``) serves what they load.
+built from them. An envelope plant (``form = "envelope"``, docs/explanation/envelope.md) with its envelope gains
+file is one model too: a single-point model per point (its plant, its ``[point.<name>]`` gains, its own signal
+map, which differs from the others' only in the operating point) and the schedule the vehicle table picks the
+point with (``monitor.model.scheduling``); the model's own plant, gains and signal map are its first point's,
+which is what the assembler and everything that does not schedule reads.
+
+The fleet config is TOML, one ``[vehicle.<sysid>]`` table each with ``plant``, ``gains`` and optionally
+``signals`` (an envelope plant with its envelope gains, and no ``signals``, serves a vehicle as well); a system
+id it does not list gets the default ``--plant``/``--gains`` model, if any. ``load_model`` loads one model,
+``load_fleet`` a fleet file of them; the vehicle table (``monitor.service.vehicles``) serves what they load.
 """
 
 from __future__ import annotations
@@ -15,13 +21,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from monitor.errors import UserError
-from monitor.gains import GainsFile, read_gains
+from monitor.gains import EnvelopeGainsFile, GainsFile, is_envelope_gains, read_envelope_gains, read_gains
 from monitor.link.signals import MAVLINK, Layouts, SignalMap, signals_for_plant
+from monitor.model.envelope import Envelope, is_envelope, load_envelope
 from monitor.model.estimator import Estimator
 from monitor.model.plant import Plant, load_plant
+from monitor.model.scheduling import Schedule, schedule_of, state_offset
 
-__all__ = ["VehicleModel", "Fleet", "load_model", "load_fleet"]
+__all__ = ["VehicleModel", "EnvelopeModel", "Fleet", "load_model", "load_fleet"]
 
 log = logging.getLogger("monitor.service.vehicles")  # the --force warning's logger name predates the split
 
@@ -34,10 +44,52 @@ class VehicleModel:
     gains: GainsFile
     estimator: Estimator
     signals: SignalMap
+    envelope: EnvelopeModel | None = None  # an envelope plant: its points (this model's fields are the first's)
 
     @property
     def h(self) -> float:
         return self.plant.h
+
+    @property
+    def name(self) -> str:
+        """The plant's name, or the envelope's."""
+        return self.envelope.envelope.name if self.envelope is not None else self.plant.name
+
+    @property
+    def digest(self) -> str:
+        return self.envelope.envelope.digest if self.envelope is not None else self.plant.digest
+
+    def point_models(self) -> tuple[VehicleModel, ...]:
+        """Every single-point model this one runs: itself, or each point of its envelope."""
+        return self.envelope.points if self.envelope is not None else (self,)
+
+
+@dataclass(frozen=True, eq=False)
+class EnvelopeModel:
+    """An envelope's points as single-point models, the schedule that picks among them and each point's offset in
+    the estimator's state (``monitor.model.scheduling``: a switch re-bases the state by their difference)."""
+
+    envelope: Envelope
+    gains: EnvelopeGainsFile
+    points: tuple[VehicleModel, ...]
+    schedule: Schedule
+    offsets: tuple[np.ndarray, ...]
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.envelope.names
+
+    def describe(self) -> str:
+        """``envelope c172p scheduled by airspeed: slow (airspeed 36 m/s), cruise (airspeed 51.4 m/s)``."""
+        signals = self.points[0].signals
+        units = {n: signals.measured[n].unit for n in self.envelope.schedule}
+        places = ", ".join(
+            f"{p.name} ("
+            + ", ".join(f"{n} {p.at[n]:.6g}" + (f" {units[n]}" if units[n] else "") for n in self.envelope.schedule)
+            + ")"
+            for p in self.envelope.points
+        )
+        return f"envelope {self.envelope.name} scheduled by {', '.join(self.envelope.schedule)}: {places}"
 
 
 def load_model(
@@ -49,20 +101,38 @@ def load_model(
 ) -> VehicleModel:
     """Load and cross-check a plant and its gains; a plant-hash mismatch is a UserError unless ``force``.
 
-    ``layouts``: where the signal map's message names are looked up (a DataFlash log's own, for ``analyse``)."""
+    ``layouts``: where the signal map's message names are looked up (a DataFlash log's own, for ``analyse``).
+    An envelope plant file takes its envelope gains file (:func:`load_envelope_model`)."""
+    if is_envelope(plant_spec):
+        if signals_file is not None:
+            raise UserError(
+                f"--signals does not apply to the envelope plant {plant_spec}: each point's [signals] table is its "
+                "signal map (its operating point is the point's own)"
+            )
+        return load_envelope_model(plant_spec, gains_path, force, layouts)
+    if is_envelope_gains(gains_path):
+        raise UserError(
+            f"{gains_path}: is an envelope gains file (per-point gains, from `fault-monitor design --plant "
+            f"ENVELOPE.toml`); it runs with its envelope plant file as --plant, not with {plant_spec}"
+        )
     plant = load_plant(plant_spec)
     gains = read_gains(gains_path)
     gains.check_plant(plant)
+    _check_hash(gains, plant, f"{gains_path}", str(plant_spec), force)
+    return _single(plant, gains, signals_for_plant(plant, signals_file, layouts))
+
+
+def _check_hash(gains: GainsFile, plant: Plant, label: str, plant_label: str, force: bool) -> None:
     designed_for = gains.meta.get("plant_hash")
     if designed_for != plant.digest:
-        what = (
-            f"{gains_path}: designed for plant {designed_for or '(no hash recorded)'}, "
-            f"not for {plant_spec} ({plant.digest})"
-        )
+        recorded = designed_for or "(no hash recorded)"
+        what = f"{label}: designed for plant {recorded}, not for {plant_label} ({plant.digest})"
         if not force:
             raise UserError(f"{what}; use --force to run it anyway")
         log.warning("%s; running anyway (--force)", what)
-    signals = signals_for_plant(plant, signals_file, layouts)
+
+
+def _single(plant: Plant, gains: GainsFile, signals: SignalMap) -> VehicleModel:
     limit = plant.actuator.limit
     if limit is not None:
         for name, u0 in zip(signals.actuator, signals.u0, strict=True):
@@ -77,6 +147,57 @@ def load_model(
         Estimator(plant, gains.gains, u0=signals.u0, fault_time_constant=gains.fault_time_constant),
         signals,
     )
+
+
+def _same_map(a: SignalMap, b: SignalMap) -> bool:
+    """Two signal maps that read the same wire (their operating points may differ)."""
+    keys = ("instant", "measured", "outputs", "actuator", "record", "command", "time_fields")
+    return all(getattr(a, k) == getattr(b, k) for k in keys)
+
+
+def load_envelope_model(
+    plant_path: str | Path, gains_path: str | Path, force: bool = False, layouts: Layouts = MAVLINK
+) -> VehicleModel:
+    """An envelope plant and its envelope gains as one scheduled model (module docstring).
+
+    Refused with one line: a single-point gains file, gains for other points or shapes, a hash mismatch (the
+    envelope's or a point's, unless ``force``), points whose signal maps read different fields."""
+    envelope = load_envelope(plant_path)
+    gains = read_envelope_gains(gains_path)
+    other = gains.check_envelope(envelope)
+    if other is not None:
+        if not force:
+            raise UserError(f"{gains_path}: {other}; use --force to run it anyway")
+        log.warning("%s: %s; running anyway (--force)", gains_path, other)
+    points: list[VehicleModel] = []
+    for point in envelope.points:
+        gf = gains.points[point.name]
+        _check_hash(gf, point.plant, f"{gains_path} [point.{point.name}]", f"point '{point.name}'", force)
+        where = f"{plant_path}, point '{point.name}'"
+        try:
+            signals = signals_for_plant(point.plant, None, layouts)
+        except UserError as exc:
+            raise UserError(f"{where}: {exc}") from None
+        if points and not _same_map(points[0].signals, signals):
+            raise UserError(
+                f"{where}: its [signals] reads other fields than point '{envelope.points[0].name}' (the points of an "
+                "envelope must read the same MAVLink fields; only their operating points differ)"
+            )
+        points.append(_single(point.plant, gf, signals))
+    offsets = tuple(
+        state_offset(
+            m.plant.physical.C,
+            m.signals.y0,
+            m.signals.u0,
+            m.plant.n,
+            m.plant.q,
+            m.plant.lags.last if m.plant.lags is not None else 0,
+        )
+        for m in points
+    )
+    scheduled = EnvelopeModel(envelope, gains, tuple(points), schedule_of(envelope), offsets)
+    first = points[0]
+    return VehicleModel(first.plant, first.gains, first.estimator, first.signals, scheduled)
 
 
 class Fleet:

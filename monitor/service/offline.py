@@ -21,12 +21,12 @@ from monitor.link.frames import FrameParser
 from monitor.link.log_inventory import LogInventory
 from monitor.link.tlog import TlogStats, read_tlog
 from monitor.service.alarm import AlarmConfig
-from monitor.service.fleet_file import Fleet
+from monitor.service.fleet_file import EnvelopeModel, Fleet
 from monitor.service.pipeline import Pipeline
 from monitor.service.records import SampleRecord
 from monitor.service.vehicles import VehicleTable
 
-__all__ = ["LogAnalysis", "analyse_log", "analyse_dataflash"]
+__all__ = ["LogAnalysis", "analyse_log", "analyse_dataflash", "envelope_report", "envelope_lines"]
 
 log = logging.getLogger("monitor.analyse")
 
@@ -172,3 +172,43 @@ def analyse_dataflash(
         {"dataflash_records_read": dlog.records_read},
         dlog.inventory,
     )
+
+
+def envelope_report(env: EnvelopeModel, records: list[SampleRecord]) -> dict[str, Any]:
+    """Per point of an envelope model: how many samples it estimated and how many of those were outside the
+    identified range (alarms paused); with the schedule and each point's place. Every vehicle of ``records``."""
+    used = [0] * len(env.points)
+    outside = [0] * len(env.points)
+    for r in records:
+        if r.point is None:
+            continue
+        used[r.point] += 1
+        outside[r.point] += r.inside is False
+    names = env.envelope.schedule
+    return {
+        "name": env.envelope.name,
+        "schedule": list(names),
+        "units": [env.points[0].signals.measured[n].unit for n in names],
+        "points": [
+            {"name": p.name, "at": p.at, "samples": used[i], "outside": outside[i]}
+            for i, p in enumerate(env.envelope.points)
+        ],
+        "samples": sum(used),
+        "outside": sum(outside),
+    }
+
+
+def envelope_lines(report: dict[str, Any]) -> list[str]:
+    """``envelope_report`` as the text report's lines: one per point."""
+    lines = [
+        f"envelope {report['name']} scheduled by {', '.join(report['schedule'])}: {report['samples']} samples, "
+        f"{report['outside']} outside the identified range (alarms paused)"
+    ]
+    width = max(len(p["name"]) for p in report["points"])
+    for p in report["points"]:
+        place = ", ".join(
+            f"{n} {p['at'][n]:g}" + (f" {u}" if u else "")
+            for n, u in zip(report["schedule"], report["units"], strict=True)
+        )
+        lines.append(f"  point {p['name']:<{width}}  ({place}): {p['samples']} samples, {p['outside']} outside")
+    return lines

@@ -15,6 +15,11 @@ Operating point (a plant identified about a trim): the estimator's quantities ar
 leaves on MAVLink and in the Zenoh estimate's ``u`` is the absolute deflection ``u0 + u``; the recording
 keeps the measured values as measured (absolute) and the estimator's y, x_hat, f_hat, u, residual as
 deviations (its properties carry the operating point).
+
+An envelope model: each sample's deviations are from the operating point of the point that stepped it; the
+Zenoh estimate says which (``point``, ``in_envelope``) and so does the recording (``envelope/point``, the point's
+index, and ``envelope/inside``); the summary counts ``outside_envelope``. A single-point model's estimate,
+recording and summary are what they were.
 """
 
 from __future__ import annotations
@@ -79,6 +84,7 @@ class Pipeline:
         self.feedback_sent = 0
         self.warned_v1 = False
         self._wanted: dict[int, tuple[str, MessageLayout]] = {}
+        self.scheduled = any(m.envelope is not None for m in table.fleet.models())
         for model in table.fleet.models():
             for name in {model.signals.instant, *(s.message for s in model.signals.measured.values())}:
                 layout = layout_by_name(name)
@@ -167,6 +173,7 @@ class Pipeline:
                 link.send(out, peer)
         raised = vehicle.alarm.raised
         if self.publisher is not None:
+            env = vehicle.model.envelope
             self.publisher.estimate(
                 (
                     vehicle.sysid,
@@ -180,6 +187,7 @@ class Pipeline:
                     raised,
                     p.command_applied,
                     vehicle.commands_effective,
+                    (env.names[p.point], p.inside) if env is not None and p.point is not None else None,
                 )
             )
             if p.alarm_event is not None:
@@ -220,6 +228,8 @@ class Pipeline:
             processing_s=processing,
             alarm=p.vehicle.alarm.raised,
             run=p.vehicle.run,
+            point=p.point,
+            inside=p.inside,
         )
 
     # --- housekeeping and reporting -----------------------------------------------------------------
@@ -247,6 +257,8 @@ class Pipeline:
         }
         if self.publisher is not None:
             out.update(published=self.publisher.published, publish_drops=self.publisher.dropped)
+        if not self.scheduled:  # only an envelope has an identified range to be outside of
+            del out["outside_envelope"]
         return out
 
     def summary(self) -> str:
@@ -268,6 +280,7 @@ class Pipeline:
             "no_report",
             "not_applied",
             "rejected_values",
+            "outside_envelope",
             "future",
             "foreign_source",
             "excess",

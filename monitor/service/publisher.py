@@ -30,8 +30,8 @@ log = logging.getLogger(__name__)
 
 _JSON = zenoh.Encoding.APPLICATION_JSON
 
-# (sysid, k, t, f_hat, x_hat, residual, u, tau, alarm, command_applied, commands_effective): built in the loop
-# from references, no conversions
+# (sysid, k, t, f_hat, x_hat, residual, u, tau, alarm, command_applied, commands_effective, envelope): built in
+# the loop from references, no conversions; envelope is (point name, inside) for an envelope model, else None
 EstimateItem = tuple
 
 
@@ -44,10 +44,13 @@ def estimate_payload(item: EstimateItem, unit: str) -> dict[str, Any]:
     """The contract's ``fault/estimate`` payload (plant units; ``tau`` = observed delay in seconds or null).
 
     Beyond the contract: ``command_applied`` (did the previous command act, per the vehicle's actuator
-    report; null when it cannot be told) and ``commands_effective`` (false while most recent ones did not).
+    report; null when it cannot be told) and ``commands_effective`` (false while most recent ones did not); for
+    an envelope model only, ``point`` (the name of the point that estimated the sample) and ``in_envelope``
+    (false while the schedule's values are outside the identified range: the alarm is paused).
     """
-    sysid, k, t, f_hat, x_hat, residual, u, tau, alarm, applied, effective = item
-    return {
+    sysid, k, t, f_hat, x_hat, residual, u, tau, alarm, applied, effective = item[:11]
+    envelope = item[11] if len(item) > 11 else None
+    payload = {
         "sysid": sysid,
         "k": k,
         "t": t,
@@ -61,6 +64,9 @@ def estimate_payload(item: EstimateItem, unit: str) -> dict[str, Any]:
         "command_applied": applied,
         "commands_effective": effective,
     }
+    if envelope is not None:
+        payload["point"], payload["in_envelope"] = envelope
+    return payload
 
 
 def alarm_payload(sysid: int, k: int, t: float, state: str, f_hat) -> dict[str, Any]:

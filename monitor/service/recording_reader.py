@@ -9,6 +9,7 @@ rows is a small, exact inverse of what the recorder wrote. Scoring the rows is `
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import re
 import warnings
@@ -49,6 +50,18 @@ class Recording:
     properties: dict[str, str]
     vehicles: dict[int, VehicleSeries]
     has_footer: bool
+
+    @property
+    def envelope_points(self) -> list[str] | None:
+        """An envelope model's points, in the order ``SampleRecord.point`` indexes; None for one plant."""
+        raw = self.properties.get("envelope_points")
+        if not raw:
+            return None
+        try:
+            names = json.loads(raw)
+        except ValueError:
+            return None
+        return [str(n) for n in names] if isinstance(names, list) else None
 
 
 def _layout() -> dict[str, tuple[str, str, int | None, float]]:
@@ -158,7 +171,7 @@ def _column(chunk: Any, field: str, index: int | None, scale: float) -> _Column 
     return _Column(field, index, k, t, wall, values[present] / scale)
 
 
-_OPTIONAL = {"elevator", "tau_obs", "tau"}  # None when not recorded; other missing scalars read as NaN
+_OPTIONAL = {"elevator", "tau_obs", "tau", "point", "inside"}  # None when not recorded; other missing scalars NaN
 
 
 def _assemble(cls: type, sysid: int, columns: list[_Column]) -> list[Any]:
@@ -193,6 +206,10 @@ def _assemble(cls: type, sysid: int, columns: list[_Column]) -> list[Any]:
             per_row[name] = (has & (values >= 0.5)).tolist()
         elif name == "run":
             per_row[name] = [int(v) if h else 0 for v, h in zip(values.tolist(), has.tolist(), strict=True)]
+        elif name == "point":
+            per_row[name] = [int(round(v)) if h else None for v, h in zip(values.tolist(), has.tolist(), strict=True)]
+        elif name == "inside":
+            per_row[name] = [bool(v >= 0.5) if h else None for v, h in zip(values.tolist(), has.tolist(), strict=True)]
         elif name in _OPTIONAL:
             per_row[name] = [v if h else None for v, h in zip(values.tolist(), has.tolist(), strict=True)]
         else:

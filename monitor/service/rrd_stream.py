@@ -28,6 +28,7 @@ from monitor.service.records import SampleRecord, TruthRecord
 if TYPE_CHECKING:
     from monitor.model.closed_loop import Gains
     from monitor.model.plant import Plant
+    from monitor.service.fleet_file import EnvelopeModel
 
 __all__ = [
     "StreamWriter",
@@ -40,6 +41,7 @@ __all__ = [
     "TRUTH_VECTORS",
     "software_versions",
     "recording_properties",
+    "envelope_properties",
     "default_blueprint",
 ]
 
@@ -59,6 +61,8 @@ SAMPLE_SCALARS: dict[str, tuple[str, float]] = {
     "processing_s": ("timing/processing_ms", 1e3),
     "alarm": ("alarm", 1.0),
     "run": ("run", 1.0),
+    "point": ("envelope/point", 1.0),  # envelope models only: a single-point model's rows leave them out
+    "inside": ("envelope/inside", 1.0),
 }
 SAMPLE_VECTORS: dict[str, str] = {
     "y": "measured/y",
@@ -112,6 +116,25 @@ def recording_properties(plant: Plant, gains: Gains, method: str, gains_source: 
     for name in ("L", "M", "K1", "K2", "K3"):
         props[f"gains_{name}"] = json.dumps(np.asarray(getattr(gains, name), dtype=float).tolist())
     return props
+
+
+def envelope_properties(env: EnvelopeModel) -> dict[str, str]:
+    """An envelope model's properties: its name and hash, the schedule, the points' names in the order that
+    ``envelope/point`` indexes, their places and operating points (JSON), and the switching rule."""
+    from monitor.model.scheduling import HYSTERESIS
+
+    envelope = env.envelope
+    return {
+        "envelope": envelope.name,
+        "envelope_hash": envelope.digest,
+        "envelope_schedule": json.dumps(list(envelope.schedule)),
+        "envelope_points": json.dumps(list(envelope.names)),
+        "envelope_at": json.dumps([p.at for p in envelope.points]),
+        "envelope_operating_points": json.dumps(
+            {name: m.signals.operating_point for name, m in zip(envelope.names, env.points, strict=True)}
+        ),
+        "envelope_switching": f"nearest point, hysteresis {HYSTERESIS:.0%} of the spacing",
+    }
 
 
 def default_blueprint(sysids: Iterable[int]):  # -> rerun.blueprint.Blueprint

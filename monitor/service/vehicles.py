@@ -20,6 +20,17 @@ vehicle is live does not qualify and is still refused (``foreign_source``).
 
 Why a vehicle that never assembles a sample gets a WARNING: the most common set-up mistake is a signal
 map that names a message the vehicle does not send; a silent monitor would look like a network fault.
+
+An envelope model (``VehicleModel.envelope``) is scheduled per vehicle and per sample on the values of the
+schedule's signals in the assembled sample (the assembler needs them as it needs the outputs):
+``monitor.model.scheduling`` picks the point (the nearest, with a dead band of 10 % of the spacing about each
+midpoint) and, on a switch, re-bases the estimator's state (and the last command, in deviations too) into the
+new point's operating point; the point's own estimator and signal map step the sample. A sample whose
+schedule values lie outside the identified range (further below the lowest point or above the highest than
+half the spacing to its neighbour, or not finite) is *outside*: the estimator still steps it on the nearest
+point, so f_hat goes on, but the alarm does not see it (nothing is raised or cleared on it), it is counted in
+``outside_envelope`` (a sample the monitor could not judge), and one WARNING per episode says why; an INFO
+line says when the vehicle is back inside.
 """
 
 from __future__ import annotations
@@ -31,9 +42,10 @@ from dataclasses import dataclass, fields
 
 from monitor.link.assembly import AssembledSample, AssemblyCounters, SampleAssembler
 from monitor.model.estimator import EstimatorState, StepResult
+from monitor.model.scheduling import choose_point, outside_variables, rebase
 from monitor.service.alarm import Alarm, AlarmConfig
 from monitor.service.delay import DelayTracker
-from monitor.service.fleet_file import Fleet, VehicleModel
+from monitor.service.fleet_file import EnvelopeModel, Fleet, VehicleModel
 
 __all__ = ["Vehicle", "Processed", "TableCounters", "VehicleTable"]
 
@@ -79,6 +91,11 @@ class Vehicle:
         "taken_over",
         "held_missing_seen",
         "held_missing_log",
+        "point",
+        "outside",
+        "outside_samples",
+        "outside_episode",
+        "switches",
     )
 
     def __init__(
@@ -98,7 +115,8 @@ class Vehicle:
         self.state: EstimatorState = model.estimator.initial_state()
         self.alarm = Alarm(alarm)
         self.delay = DelayTracker()
-        self.assembler = SampleAssembler(model.signals, model.plant.h, observe=observe, wait_s=wait_s)
+        needs = model.envelope.envelope.schedule if model.envelope is not None else ()
+        self.assembler = SampleAssembler(model.signals, model.plant.h, observe=observe, wait_s=wait_s, needs=needs)
         self.route = route
         self.last_seen = self.first_seen = now
         self.processed = self.skipped = self.no_report = self.rejected = self.not_applied = 0
@@ -114,6 +132,11 @@ class Vehicle:
         self.taken_over = False  # a new route took over after silence and has not given a sample yet
         self.held_missing_seen = 0  # the assembler's held_missing count when last warned about (or resolved)
         self.held_missing_log = -1e9
+        self.point: int | None = None  # an envelope model: the point the last sample used (None before the first)
+        self.outside = False  # ... whether that sample was outside the identified envelope
+        self.outside_samples = 0  # samples outside the envelope, in all and in the current episode
+        self.outside_episode = 0
+        self.switches = 0  # point switches
 
 
 @dataclass
@@ -129,6 +152,7 @@ class TableCounters:
     rejected_values: int = 0  # samples whose estimator inputs were non-finite or outside their range
     foreign_source: int = 0  # messages claiming a vehicle's sysid from another link/peer while it is live
     not_applied: int = 0  # commands the next sample's actuator report shows did not act
+    outside_envelope: int = 0  # samples outside an envelope's identified range: estimated, not judged by the alarm
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -149,6 +173,8 @@ class Processed:
         "command_applied",
         "u_abs",
         "compensation",
+        "point",
+        "inside",
     )
 
     def __init__(
@@ -176,6 +202,8 @@ class Processed:
         # the absolute deflection u0 + u(k): what goes on the wire (observe-only: what the vehicle reported)
         self.u_abs = u_abs if u_abs is not None else result.u.tolist()
         self.compensation: list[float] | None = None  # --compensate: what is sent (K3 f_hat), added on board
+        self.point: int | None = None  # an envelope model: the index of the point that stepped the sample
+        self.inside: bool | None = None  # ... and whether its schedule values were inside the identified range
 
 
 class VehicleTable:
@@ -225,12 +253,12 @@ class VehicleTable:
         self._runs[sysid] = run
         vehicle = self.vehicles[sysid] = Vehicle(sysid, model, self.alarm, route, now, self.observe, self.wait_s, run)
         self.counters.vehicles_seen += 1
-        op = model.signals.describe_operating_point()
+        op = model.signals.describe_operating_point() if model.envelope is None else model.envelope.describe()
         log.info(
             "vehicle sysid %d from %s: new estimator (plant %s; %s%s)",
             sysid,
             _where(route),
-            model.plant.name,
+            model.name,
             model.signals.describe(),
             f"; {op}" if op else "",
         )
@@ -358,6 +386,11 @@ class VehicleTable:
                     vehicle.rejected,
                 )
             return None
+        inside: bool | None = None
+        if model.envelope is not None:  # pick the point (before a non-finite schedule value is dropped below)
+            point, inside = self._schedule(vehicle, model.envelope, values, sample.k)
+            model = model.envelope.points[point]
+            sig = model.signals
         for name in [n for n, v in values.items() if not math.isfinite(v)]:
             del values[name]  # a non-finite recorded-only signal is not recorded
         # the estimator works in deviations from the signal map's operating point (zero when it has none)
@@ -401,11 +434,63 @@ class VehicleTable:
             self.counters.skipped += result.skipped
         t = sample.time_usec * 1e-6
         f_mag = max(abs(float(f)) for f in result.f_hat)
-        event = vehicle.alarm.update(f_mag)
+        event = vehicle.alarm.update(f_mag) if inside is not False else None  # outside: the alarm does not judge
         tau_obs = vehicle.delay.update(t, wall)
         processed = Processed(vehicle, sample, result, t, y, tau_obs, event, f_mag, applied, u_abs)
         processed.compensation = compensation
+        if inside is not None:
+            processed.point, processed.inside = vehicle.point, inside
         return processed
+
+    def _schedule(self, vehicle: Vehicle, env: EnvelopeModel, values: dict[str, float], k: int) -> tuple[int, bool]:
+        """The envelope's point for this sample and whether it is inside the identified range (module docstring);
+        on a switch the vehicle's estimator state and last command are re-based into the new point's deviations."""
+        sched = env.schedule
+        x = [float(values.get(name, math.nan)) for name in sched.names]
+        out = outside_variables(sched, x)
+        previous = vehicle.point
+        if all(map(math.isfinite, x)):
+            point = choose_point(sched, x, previous)
+        else:  # no usable value: the point stays (the first sample's: the first point)
+            point = previous if previous is not None else 0
+        if previous is not None and point != previous:
+            vehicle.state.z = rebase(vehicle.state.z, env.offsets[previous], env.offsets[point])
+            if vehicle.last_command is not None:  # a deviation too: judged against the next report in the new one
+                old, new = env.points[previous].signals.u0, env.points[point].signals.u0
+                vehicle.last_command = [c + a - b for c, a, b in zip(vehicle.last_command, old, new, strict=True)]
+            vehicle.switches += 1
+            log.info(
+                "vehicle %d: envelope point %s -> %s at k=%d (%s)",
+                vehicle.sysid,
+                sched.points[previous],
+                sched.points[point],
+                k,
+                _schedule_values(env, x, range(len(x))),
+            )
+        vehicle.point = point
+        if out:
+            vehicle.outside_samples += 1
+            vehicle.outside_episode += 1
+            self.counters.outside_envelope += 1
+            if not vehicle.outside:
+                vehicle.outside = True
+                ranges = "; ".join(_envelope_range(env, i) for i in out)
+                log.warning(
+                    "vehicle %d: %s outside the identified envelope %s: fault alarms paused",
+                    vehicle.sysid,
+                    _schedule_values(env, x, out),
+                    ranges,
+                )
+        elif vehicle.outside:
+            vehicle.outside = False
+            log.info(
+                "vehicle %d: %s back inside the identified envelope after %d sample(s) outside: fault alarms resume",
+                vehicle.sysid,
+                _schedule_values(env, x, range(len(x))),
+                vehicle.outside_episode,
+            )
+            vehicle.outside_episode = 0
+        return point, not out
 
     def _judge_applied(self, vehicle: Vehicle, k: int, reported: list[float]) -> bool | None:
         """Did the last command (for k-1, or earlier when samples were lost since) act? The report at k says so."""
@@ -485,7 +570,7 @@ class VehicleTable:
             if v.processed or v.warned_missing or now - v.first_seen < MISSING_WARNING_S:
                 continue
             asm = v.assembler
-            missing = [m for m in asm.signals.messages(self.observe) if m not in asm.seen]
+            missing = [m for m in (*asm.signals.messages(self.observe), *asm.needed_messages) if m not in asm.seen]
             if not missing and asm.expect_actuator:
                 missing = [m for m in asm.signals.actuator_messages() if m not in asm.seen]
             stale = asm.missing_held() if not missing else ()
@@ -513,6 +598,28 @@ def _alive(route: object) -> bool:
     peer = route[1] if isinstance(route, tuple) and len(route) == 2 else None
     closed = getattr(peer, "is_closed", None)
     return not closed() if callable(closed) else True
+
+
+def _unit(env: EnvelopeModel, name: str) -> str:
+    unit = env.points[0].signals.measured[name].unit
+    return f" {unit}" if unit else ""
+
+
+def _schedule_values(env: EnvelopeModel, x: list[float], which) -> str:
+    """``airspeed 30.2 m/s`` (the schedule's values ``which``; one that is not finite says so)."""
+    names = env.schedule.names
+    return ", ".join(
+        f"{names[i]} {x[i]:.1f}{_unit(env, names[i])}" if math.isfinite(x[i]) else f"{names[i]} not a number"
+        for i in which
+    )
+
+
+def _envelope_range(env: EnvelopeModel, i: int) -> str:
+    """``36.0-62.0 m/s``: the points' values of schedule variable ``i`` (with its name when there are two)."""
+    low, high = env.schedule.inside_range(i)
+    name = env.schedule.names[i]
+    prefix = f"{name} " if len(env.schedule.names) > 1 else ""
+    return f"{prefix}{low:.1f}-{high:.1f}{_unit(env, name)}"
 
 
 def _where(route: object) -> str:

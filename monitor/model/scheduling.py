@@ -1,0 +1,175 @@
+"""Scheduling an envelope's points on the measured values: which point, whether inside, and the switch.
+
+Pure functions of the envelope's lookup table (:class:`Schedule`) and the estimator's state vector; the live loop
+(``monitor.service.vehicles``) calls them once per sample and owns the state they decide about.
+
+**Which point: the nearest, with hysteresis.** Distances are taken in the schedule's variables each divided by
+the points' spread of it (as :meth:`Envelope.nearest`: airspeed in m/s and bank in deg weigh alike), Euclidean.
+From the current point ``c`` the scheduler moves to the nearest point ``j`` only when ``j`` is nearer than ``c`` by
+``HYSTERESIS`` (10 %) of the distance between ``c`` and ``j``: ``d(x, c) - d(x, j) > 0.1 d(c, j)``. On one
+variable that is 5 % of the spacing past the midpoint of the two points, and the way back 5 % short of it: a
+dead band 10 % of the spacing wide about each midpoint, so a value wandering about a midpoint (turbulence on
+the airspeed) does not chatter between the points. Why a band and not a dwell time: the envelope's certificate
+covers switching at any rate (docs/explanation/envelope.md), so the band is not needed for stability; it is
+there for the offsets' jumps (each switch re-bases the state, which is exact only as far as the points' trims
+are consistent), and a band in the measured variable adds no delay to a real change of flight condition.
+
+**Inside or outside the identified range.** Per variable, with the points' distinct values ``v_1 < ... < v_N``:
+inside when ``v_1 - (v_2 - v_1)/2 <= x <= v_N + (v_N - v_{N-1})/2``, i.e. no further below the lowest point or
+above the highest than half the spacing to its neighbour (as far as the outermost points would serve if the
+envelope went on with the same spacing). With two variables the region is that box: a hole inside it (a 2-D
+schedule whose points do not fill the box) is served by its nearest point, not flagged. A variable with a
+single value across the points (every point at the same bank) bounds nothing. Outside, the estimator still runs
+on the nearest point (the estimate goes on) but the live loop pauses the alarm (``monitor.service.vehicles``).
+
+**Re-basing the state on a switch.** The estimator's state ``z = [x_hat; f_hat; u(k-1)]`` is in deviations from
+the point's operating point (``y0``, ``u0`` of its ``[signals]``). Moving from point ``i`` to ``j`` keeps the
+absolute quantities: with ``T_p = pinv(C_p)`` (the state that the outputs' trim gives),
+
+    x_hat_j  = x_hat_i + T_i y0_i - T_j y0_j          (= x_hat_i + T (y0_i - y0_j) when the points share C)
+    u(k-1)_j = u(k-1)_i + (u0_i - u0_j)               (and each command still in flight of a lagged plant)
+    f_hat_j  = f_hat_i                                 (an additive actuator fault is the same at every point)
+
+The state's operating point is known only through the outputs: ``T (y0_i - y0_j)`` is exact when ``C`` is
+invertible, which it is for identified models (``C = I``: every state is measured), and the least-squares
+estimate of the trim's move otherwise (an unmeasured state's trim is taken as unchanged). Written as
+``z_j = z_i + w_i - w_j`` with one offset ``w_p`` per point, re-basing from ``i`` to ``j`` and back is the
+identity. The reported channel's low-pass state (``EstimatorState.f_reported``) is ``f_hat``'s and is kept.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from monitor.model.envelope import Envelope
+
+__all__ = [
+    "HYSTERESIS",
+    "Schedule",
+    "schedule_of",
+    "make_schedule",
+    "distances",
+    "choose_point",
+    "outside_variables",
+    "state_offset",
+    "rebase",
+    "values_in_order",
+]
+
+HYSTERESIS = 0.1  # switch when the new point is nearer by this fraction of the distance between the two points
+
+
+@dataclass(frozen=True, eq=False)
+class Schedule:
+    """An envelope's lookup table: each point's place (``at``, ``(points, variables)``), each variable's scale
+    (the points' spread of it, 1 where they all share a value) and the identified range per variable."""
+
+    names: tuple[str, ...]  # the schedule's variables
+    points: tuple[str, ...]  # the points' names, in the envelope's order
+    at: np.ndarray
+    scale: np.ndarray
+    low: np.ndarray  # the lowest point's value of each variable, and how far below it is still inside
+    high: np.ndarray
+    below: np.ndarray
+    above: np.ndarray
+
+    def inside_range(self, i: int) -> tuple[float, float]:
+        """The points' values of variable ``i`` (lowest, highest): the identified envelope as a message names it."""
+        return float(self.low[i]), float(self.high[i])
+
+
+def schedule_of(envelope: Envelope) -> Schedule:
+    """The envelope's lookup table."""
+    return make_schedule(envelope.schedule, envelope.names, envelope.at_matrix)
+
+
+def make_schedule(names: Sequence[str], points: Sequence[str], at: np.ndarray) -> Schedule:
+    """A lookup table from the points' places ``at`` (``(points, variables)``, in ``names``' order)."""
+    at = np.array(at, dtype=float).reshape(len(points), len(names))
+    scale = np.ptp(at, axis=0)
+    scale[scale == 0] = 1.0
+    below, above = [], []
+    for column in at.T:
+        values = np.unique(column)
+        if values.size < 2:  # one value across the points: this variable bounds nothing (module docstring)
+            below.append(np.inf)
+            above.append(np.inf)
+        else:
+            below.append(0.5 * (values[1] - values[0]))
+            above.append(0.5 * (values[-1] - values[-2]))
+    return Schedule(
+        names=tuple(names),
+        points=tuple(points),
+        at=at,
+        scale=scale,
+        low=at.min(axis=0),
+        high=at.max(axis=0),
+        below=np.array(below),
+        above=np.array(above),
+    )
+
+
+def distances(schedule: Schedule, x: Sequence[float]) -> np.ndarray:
+    """The scaled Euclidean distance from ``x`` (the schedule's values, in its order) to every point."""
+    diff = (schedule.at - np.asarray(x, dtype=float)) / schedule.scale
+    out: np.ndarray = np.sqrt(np.sum(diff * diff, axis=1))
+    return out
+
+
+def choose_point(schedule: Schedule, x: Sequence[float], current: int | None, margin: float = HYSTERESIS) -> int:
+    """The point to use for values ``x``: the nearest, but from ``current`` only when the nearest is nearer by
+    ``margin`` times the distance between the two points (module docstring); ``current`` None: the nearest."""
+    d = distances(schedule, x)
+    nearest = int(np.argmin(d))
+    if current is None or nearest == current:
+        return nearest
+    spacing = float(np.sqrt(np.sum(((schedule.at[current] - schedule.at[nearest]) / schedule.scale) ** 2)))
+    return nearest if d[current] - d[nearest] > margin * spacing else current
+
+
+def outside_variables(schedule: Schedule, x: Sequence[float]) -> list[int]:
+    """The schedule variables whose value lies outside the identified range (module docstring); empty: inside.
+    A non-finite value is outside."""
+    out = []
+    for i, value in enumerate(x):
+        v = float(value)
+        if not np.isfinite(v) or v < schedule.low[i] - schedule.below[i] or v > schedule.high[i] + schedule.above[i]:
+            out.append(i)
+    return out
+
+
+def state_offset(
+    C: np.ndarray, y0: Sequence[float], u0: Sequence[float], n: int, q: int, lag_slots: int = 0
+) -> np.ndarray:
+    """A point's offset ``w_p`` in the estimator's state ``[x_hat; f_hat; u(k-1)]`` (module docstring).
+
+    ``C``: the physical plant's output matrix (without the commands in flight); ``n``: the estimator's state size,
+    the physical states and ``lag_slots`` commands in flight after them; ``q``: the faults."""
+    u = np.asarray(u0, dtype=float)
+    x = np.linalg.pinv(np.asarray(C, dtype=float)) @ np.asarray(y0, dtype=float)
+    w = np.zeros(n + q + u.size)
+    w[: x.size] = x
+    for s in range(lag_slots):
+        w[x.size + s * u.size : x.size + (s + 1) * u.size] = u
+    w[n + q :] = u
+    return w
+
+
+def rebase(z: np.ndarray, offset_from: np.ndarray, offset_to: np.ndarray) -> np.ndarray:
+    """The state ``z`` of a point with offset ``offset_from`` in the deviations of the point with ``offset_to``."""
+    out: np.ndarray = np.asarray(z, dtype=float) + (offset_from - offset_to)
+    return out
+
+
+def values_in_order(schedule: Schedule, values: Mapping[str, float]) -> list[float] | None:
+    """The schedule's values from a sample's ``{name: value}`` in the schedule's order; None when one is absent."""
+    out = []
+    for name in schedule.names:
+        v = values.get(name)
+        if v is None:
+            return None
+        out.append(float(v))
+    return out
