@@ -1,0 +1,201 @@
+"""A scheduled envelope against one trim on a real flight model: max |f_hat| per mission segment, no fault flown.
+
+Run by hand (a measurement, not a test; about a minute on 2 cores):
+
+    python benchmarks/mission_envelope.py [--mission docs/examples/mission-short.toml] [--speedup 20]
+        [--work DIR] [--low 90] [--high 100]
+
+1. flies an identification mission on ``sim-vehicle --aircraft c172p`` (its own autopilot; a PRBS leg at --high
+   knots, then one at --low knots, stick and throttle held through each), logged as a tlog;
+2. identifies a longitudinal plant from each leg (``fault-monitor identify --window``), assembles the two into an
+   envelope scheduled by airspeed (``fault-monitor envelope``) and designs it, and the --high plant alone;
+3. flies the mission (the vehicle's autopilot, no fault), logged as a tlog;
+4. analyses that log with the one-trim plant and with the envelope (``fault-monitor analyse --json``, the same
+   vehicle table as ``run``) and prints per segment the largest |f_hat| of each, and the envelope's per-point
+   counts.
+
+Why tlogs and ``analyse`` rather than ``run``: the two models see the same flight, sample for sample.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import select
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RATE = 20.0  # Hz: sim-vehicle's default for an aircraft
+
+ID_MISSION = """
+[[segment]]
+name = "trim-high"
+duration = 20
+airspeed = {high}
+altitude = 3000
+bank = 0
+
+[[segment]]
+name = "id-high"
+duration = 60
+airspeed = {high}
+altitude = 3000
+bank = 0
+excite = "prbs:1:40"
+
+[[segment]]
+name = "to-low"
+duration = 50
+airspeed = {low}
+altitude = 3000
+bank = 0
+
+[[segment]]
+name = "id-low"
+duration = 60
+airspeed = {low}
+altitude = 3000
+bank = 0
+excite = "prbs:1:40"
+"""
+
+
+def _monitor(*args: str) -> subprocess.CompletedProcess:
+    cmd = [sys.executable, "-m", "monitor", *args]
+    done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)}: exit {done.returncode}\n{done.stderr}")
+    return done
+
+
+def log_flight(mission: Path, tlog: Path, speedup: float, seed: int) -> float:
+    """Fly ``mission`` on sim-vehicle c172p, logging every datagram as a MAVProxy-style tlog; the seconds taken."""
+    from monitor.link.tlog import TlogWriter
+
+    start = time.monotonic()
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock, TlogWriter(tlog) as writer:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+        sim = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "sim_vehicle",
+                "run",
+                "--aircraft",
+                "c172p",
+                "--mission",
+                str(mission),
+                "--mavlink",
+                f"udpout:127.0.0.1:{port}",
+                "--speedup",
+                f"{speedup:g}",
+                "--seed",
+                str(seed),
+                "--no-zenoh",
+                "--log-level",
+                "WARNING",
+            ],
+            cwd=ROOT,
+        )
+        quiet_until = None
+        while True:
+            ready, _, _ = select.select([sock], [], [], 0.2)
+            if ready:
+                writer.write_datagram(time.time_ns() // 1000, sock.recv(65535))
+                continue
+            if sim.poll() is not None:
+                quiet_until = quiet_until or time.monotonic() + 0.5
+                if time.monotonic() > quiet_until:
+                    break
+        if sim.returncode != 0:
+            raise SystemExit(f"sim-vehicle exited {sim.returncode}")
+    return time.monotonic() - start
+
+
+def segments(mission: Path) -> list[tuple[str, float, float]]:
+    """(name, start s, end s) of each segment, from the vehicle's first sample."""
+    out, t = [], 0.0
+    for seg in tomllib.loads(mission.read_text())["segment"]:
+        out.append((seg["name"], t, t + float(seg["duration"])))
+        t += float(seg["duration"])
+    return out
+
+
+def max_fhat(records: list[dict], start: float, end: float) -> float:
+    vals = [abs(f) for r in records if start <= r["t"] < end for f in r["f_hat"]]
+    return max(vals) if vals else float("nan")
+
+
+def analyse(tlog: Path, plant: Path, gains: Path, rrd: Path) -> tuple[dict, list[dict]]:
+    """``fault-monitor analyse --json`` with a recording, and the recording's rows (t from the first sample)."""
+    report = json.loads(
+        _monitor("analyse", str(tlog), "--plant", str(plant), "--gains", str(gains), "--json", "--rrd", str(rrd)).stdout
+    )
+    from monitor.service.recording_reader import load_recording
+
+    rec = load_recording(rrd)
+    samples = rec.vehicles[min(rec.vehicles)].samples
+    t0 = samples[0].t
+    rows = [{"t": s.t - t0, "f_hat": s.f_hat, "point": s.point, "inside": s.inside} for s in samples]
+    return report, rows
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--mission", default=str(ROOT / "docs/examples/mission-short.toml"))
+    p.add_argument("--speedup", type=float, default=20.0)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--low", type=float, default=90.0, help="knots of the slow identification leg")
+    p.add_argument("--high", type=float, default=100.0, help="knots of the fast identification leg")
+    p.add_argument("--work", help="keep the files here (default: a temporary directory)")
+    args = p.parse_args()
+    work = Path(args.work) if args.work else Path(tempfile.mkdtemp(prefix="mission-envelope-"))
+    work.mkdir(parents=True, exist_ok=True)
+    mission = Path(args.mission)
+
+    # 1-2. identification legs, plants, the envelope and the designs
+    id_mission = work / "identification.toml"
+    id_mission.write_text(ID_MISSION.format(high=args.high, low=args.low))
+    id_log = work / "identification.tlog"
+    took = log_flight(id_mission, id_log, args.speedup, args.seed)
+    print(f"identification flight: {took:.1f} s", file=sys.stderr)
+    legs = {name: (a, b) for name, a, b in segments(id_mission)}
+    plants = {}
+    for leg, label in (("id-high", f"c172p-{args.high:g}kt"), ("id-low", f"c172p-{args.low:g}kt")):
+        a, b = legs[leg]
+        plants[leg] = work / f"{label}.toml"
+        _monitor("identify", str(id_log), "--out", str(plants[leg]), "--window", f"{a - 2:g}:{b:g}", "--name", label)
+    env, env_gains, one_gains = work / "c172p-env.toml", work / "c172p-env-gains.toml", work / "c172p-one-gains.toml"
+    _monitor("envelope", str(plants["id-low"]), str(plants["id-high"]), "--schedule", "airspeed", "--out", str(env))
+    start = time.monotonic()
+    _monitor("design", "--plant", str(env), "--out", str(env_gains), "--jobs", "2", "--quiet")
+    print(f"envelope design: {time.monotonic() - start:.1f} s", file=sys.stderr)
+    _monitor("design", "--plant", str(plants["id-high"]), "--out", str(one_gains), "--quiet")
+
+    # 3-4. the mission, and both models over its log
+    flight = work / "mission.tlog"
+    took = log_flight(mission, flight, args.speedup, args.seed)
+    print(f"mission flight: {took:.1f} s", file=sys.stderr)
+    _one_report, one = analyse(flight, plants["id-high"], one_gains, work / "one.rrd")
+    env_report, scheduled = analyse(flight, env, env_gains, work / "env.rrd")
+    print(f"files in {work}")
+    print(f"{'segment':<14}{'one trim (' + plants['id-high'].stem + ')':>28}{'envelope':>12}")
+    for name, a, b in segments(mission):
+        print(f"{name:<14}{max_fhat(one, a, b):>28.3f}{max_fhat(scheduled, a, b):>12.3f}")
+    print(f"{'whole flight':<14}{max_fhat(one, 0, 1e9):>28.3f}{max_fhat(scheduled, 0, 1e9):>12.3f}   (deg)")
+    e = env_report["envelope"]
+    print(f"envelope {e['name']}: {e['samples']} samples, {e['outside']} outside the identified range")
+    for point in e["points"]:
+        print(f"  point {point['name']} at {point['at']}: {point['samples']} samples, {point['outside']} outside")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,119 @@
+"""An envelope scheduled on a real flight model: ``sim-vehicle --aircraft c172p`` flies the short example mission
+(level, a 45-degree turn, a slow-down from 100 to 90 kt) on its own autopilot, logged as a tlog, and ``analyse``
+reads the log with two identified points (90 and 100 kt, ``tests/data/c172p-envelope-90-100kt*.toml``, made by
+``benchmarks/mission_envelope.py``) and with the 100-kt point alone. Loopback only; every wait bounded."""
+
+from __future__ import annotations
+
+import select
+import socket
+import time
+from pathlib import Path
+
+import numpy as np
+
+from monitor.design.result import DesignResult
+from monitor.gains import read_envelope_gains, write_gains
+from monitor.link.tlog import TlogWriter
+from monitor.model.plant import load_plant
+from monitor.service.alarm import AlarmConfig
+from monitor.service.fleet_file import Fleet, load_model
+from monitor.service.offline import analyse_log
+from tests.daemons import REPO, Daemon
+
+DATA = REPO / "tests" / "data"
+ENVELOPE, ENVELOPE_GAINS = DATA / "c172p-envelope-90-100kt.toml", DATA / "c172p-envelope-90-100kt-gains.toml"
+ONE = DATA / "c172p-100kt.toml"
+SHORT = REPO / "docs" / "examples" / "mission-short.toml"
+H = 0.05
+
+
+def log_mission(tmp_path: Path) -> Path:
+    """The short mission flown as fast as JSBSim goes, every datagram logged as a ground station would."""
+    tlog = tmp_path / "mission.tlog"
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock, TlogWriter(tlog) as writer:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+        args = ["run", "--aircraft", "c172p", "--mission", str(SHORT), "--speedup", "1e4", "--no-zenoh"]
+        with Daemon("sim_vehicle", [*args, "--mavlink", f"udpout:127.0.0.1:{port}"], tmp_path / "vehicle.log") as d:
+            deadline = time.monotonic() + 60.0
+            quiet_until = None
+            while time.monotonic() < deadline:
+                ready, _, _ = select.select([sock], [], [], 0.1)
+                if ready:
+                    writer.write_datagram(time.time_ns() // 1000, sock.recv(65535))
+                    continue
+                if d.proc is not None and d.proc.poll() is not None:
+                    quiet_until = quiet_until or time.monotonic() + 0.3
+                    if time.monotonic() > quiet_until:
+                        break
+            assert d.wait(10) == 0, d.log()[-3000:]
+    return tlog
+
+
+def test_the_envelope_switches_to_the_slow_point_and_reads_the_slow_down_closer_to_zero(tmp_path: Path) -> None:
+    tlog = log_mission(tmp_path)
+    point = read_envelope_gains(ENVELOPE_GAINS).points["c172p-100kt"]
+    one_gains = tmp_path / "one-gains.toml"
+    write_gains(one_gains, DesignResult("certified", point.gains, 0.0, 0.0, 0.0, 0.0, 0.0), load_plant(ONE))
+    alarm = AlarmConfig()
+    runs = {}
+    for label, plant, gains in (("one", ONE, one_gains), ("envelope", ENVELOPE, ENVELOPE_GAINS)):
+        model = load_model(plant, gains)
+        runs[label] = (model, analyse_log(tlog, Fleet(model), alarm).records)
+    (env_model, scheduled), (_m, one) = runs["envelope"], runs["one"]
+    assert [r.k for r in scheduled] == [r.k for r in one] and len(one) >= 1490  # the same samples, the whole flight
+    names = env_model.envelope.names
+    used = [names[r.point] for r in scheduled]
+    t = np.array([r.t - one[0].t for r in one])
+    f_one = np.array([r.f_hat[0] for r in one])
+    f_env = np.array([r.f_hat[0] for r in scheduled])
+    # 100 kt through the level leg and the turn, then one switch to 90 kt in the slow-down (from 40 s), none outside
+    switch = used.index("c172p-90kt")
+    assert set(used[:switch]) == {"c172p-100kt"} and set(used[switch:]) == {"c172p-90kt"} and t[switch] > 40.0
+    assert all(r.inside for r in scheduled)
+    # until the switch the same point and gains: the same estimate
+    assert np.allclose(f_env[:switch], f_one[:switch], rtol=0, atol=1e-9)
+    # settled at 90 kt (the mission's last 15 s) the slow point's trim reads the steady flight closer to no fault
+    settled = t >= 60.0
+    one_max, env_max = np.abs(f_one[settled]).max(), np.abs(f_env[settled]).max()
+    print(f"max |f_hat| over the whole flight: one trim {np.abs(f_one).max():.3f}, envelope {np.abs(f_env).max():.3f}")
+    print(f"max |f_hat| settled at 90 kt (t >= 60 s): one trim {one_max:.3f}, envelope {env_max:.3f}")
+    assert env_max < one_max
+
+
+def test_run_schedules_the_envelope_and_says_which_point_on_zenoh_and_in_the_recording(tmp_path: Path) -> None:
+    """``fault-monitor run --observe`` with the envelope, the vehicle flying the mission: the ready line names the
+    envelope and its points, every estimate names its point, the recording keeps it, the summary counts none
+    outside."""
+    from monitor.service.recording_reader import load_recording
+    from tests.daemons import free_udp_port
+    from tests.monitor_bus import processed_count, wait_ready, zenoh_bus
+
+    port, rrd = free_udp_port(), tmp_path / "run.rrd"
+    with zenoh_bus() as bus:
+        estimates = bus.collect("uav/*/fault/estimate")
+        args = ["run", "--observe", "--plant", str(ENVELOPE), "--gains", str(ENVELOPE_GAINS)]
+        args += ["--mavlink", f"udpin:127.0.0.1:{port}", "--rrd", str(rrd), "--no-truth", "--no-gcs-feedback"]
+        args += ["--zenoh-mode", "client", "--zenoh-connect", bus.endpoint, "--name", "envelope"]
+        with Daemon("monitor", args, tmp_path / "monitor.log") as monitor:
+            wait_ready(monitor)
+            flight = ["run", "--aircraft", "c172p", "--mission", str(SHORT), "--speedup", "100", "--no-zenoh"]
+            with Daemon("sim_vehicle", [*flight, "--mavlink", f"udpout:127.0.0.1:{port}"], tmp_path / "v.log") as v:
+                assert v.wait(60) == 0, v.log()[-3000:]
+            time.sleep(1.0)  # the last estimates through Zenoh
+            assert monitor.stop() == 0
+            log = monitor.log()
+    assert (
+        "envelope c172p-env scheduled by airspeed: c172p-90kt (airspeed 46.2258 m/s), c172p-100kt (airspeed "
+        "51.4446 m/s)" in log.split("ready:")[1].splitlines()[0]
+    )
+    processed = processed_count(log)
+    assert processed >= 1400 and "outside envelope 0" in log
+    assert estimates and all(e["in_envelope"] is True for e in estimates)
+    assert {e["point"] for e in estimates} == {"c172p-90kt", "c172p-100kt"}
+    recording = load_recording(rrd)
+    assert recording.envelope_points == ["c172p-90kt", "c172p-100kt"]
+    samples = recording.vehicles[1].samples
+    assert len(samples) == processed and {s.point for s in samples} == {0, 1} and all(s.inside for s in samples)
