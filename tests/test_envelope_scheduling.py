@@ -356,6 +356,26 @@ def test_a_sweep_across_the_envelope_switches_points_flags_outside_and_pauses_th
     assert f"outside envelope {sum(outside)}" in pipeline.summary()
 
 
+def test_a_controlling_monitor_re_bases_its_last_command_so_a_switch_is_not_a_command_lost(tmp_path: Path) -> None:
+    """Closed loop: the vehicle reports the command it was sent (absolute); the monitor judges it against its last
+    command, a deviation, which a switch re-bases into the new point's trim (else every switch is 'not applied')."""
+    env, gains = c172p_envelope(tmp_path)
+    table = VehicleTable(Fleet(load_model(env, gains)), DEFAULT_ALARM)
+    sent = None
+    points = []
+    for k, V in enumerate(np.linspace(60.0, 42.0, 80)):
+        alpha, q, theta, elevator, _V = c172p_row(V)
+        ready = []
+        for name, values in messages(k, alpha, q, theta, elevator if sent is None else sent, V):
+            ready += table.message(1, name, values, "r", k * 0.05)
+        for vehicle, sample in ready:
+            p = table.process(vehicle, sample, k * 0.05, k * 0.05)
+            assert p is not None
+            sent, _ = p.u_abs[0], points.append(p.point)
+    assert points[0] == 2 and points[-1] == 0 and table.vehicles[1].switches == 2
+    assert table.counters.not_applied == 0 and table.vehicles[1].commands_effective
+
+
 def test_a_value_wandering_about_a_midpoint_keeps_its_point(tmp_path: Path) -> None:
     env, gains = c172p_envelope(tmp_path)
     pipeline, _pub, records = pipeline_for(load_model(env, gains))
