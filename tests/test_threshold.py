@@ -166,7 +166,9 @@ def test_alarm_threshold_auto_is_the_bound_with_its_margin(fast):
     from monitor.service.fleet_file import Fleet
 
     plant, result = fast
-    fleet = Fleet(SimpleNamespace(plant=plant, gains=SimpleNamespace(gains=result.gains)))
+    model = SimpleNamespace(plant=plant, gains=SimpleNamespace(gains=result.gains))
+    model.point_models = lambda: (model,)  # a single-point model runs itself (VehicleModel.point_models)
+    fleet = Fleet(model)
 
     def alarm(threshold, disturbance):
         return alarm_from_args(
