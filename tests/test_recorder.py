@@ -107,7 +107,9 @@ CHILD = textwrap.dedent("""
 
     def stop(signum, frame):  # what `fault-monitor run` does on SIGTERM: flush, footer, exit 0
         rec.close()
-        print(sent, flush=True)
+        # os.write, not print: the signal may land while the main thread is inside print("ready"), and a second
+        # print re-entering sys.stdout's buffer raises (it did, on a loaded machine)
+        os.write(1, f"{sent}\\n".encode())
         os._exit(0)  # no interpreter teardown: the file must already be complete
 
     signal.signal(signal.SIGTERM, stop)
