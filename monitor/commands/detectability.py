@@ -26,7 +26,11 @@ What fault can be seen? For a plant and its gains, the smallest constant elevato
 The step response and the Gaussian figures are at constant delays (the worst of the interval).
 --monte-carlo N --aircraft NAME checks a --turbulence answer on N seeded JSBSim flights in process (the
 monitor's estimator closing the loop as in the live service): false alarms before onset, the bias at onset,
-and per flight the smallest bias detected within T (bisection on short flights). Progress goes to stderr."""
+and per flight the smallest bias detected within T (bisection on short flights). Progress goes to stderr.
+
+An envelope plant file with its gains file (`design --plant ENV.toml`): the prediction at every point with
+its own plant and gains, one line each, and the worst point (the largest detectable bias) last; the Monte
+Carlo takes a single-point plant."""
 
 EPILOG = """\
 Example: fault-monitor detectability --plant c172p.toml --gains gains.toml --turbulence moderate
@@ -132,25 +136,22 @@ def _check(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from monitor.checks.detectability import detectability
+    from monitor.errors import UserError
+    from monitor.model.envelope import is_envelope
     from monitor.model.identification import finite_or_none  # JSON has no infinity (an undetectable bias is inf)
     from monitor.service.fleet_file import load_model
 
     _check(args)
+    if args.monte_carlo and is_envelope(args.plant):
+        raise UserError(
+            f"--monte-carlo flies one plant: {args.plant} is an envelope (check a point with its own plant and "
+            "gains files)"
+        )
     model = load_model(args.plant, args.gains, force=False)
+    if model.envelope is not None:
+        return _run_envelope(args, model)
     plant = model.plant
-    result = detectability(
-        plant,
-        model.gains.gains,
-        disturbance_bound=args.disturbance_bound,
-        turbulence=args.turbulence,
-        altitude_ft=args.altitude,
-        false_alarms_per_hour=args.false_alarms_per_hour,
-        within_s=args.within,
-        alarm_samples=args.alarm_samples,
-        probability=args.probability,
-        report_time_constant=getattr(model.gains, "fault_time_constant", None),
-    )
+    result = _predict(args, plant, model.gains)
     mc = None
     if args.monte_carlo:
         from monitor.jsbsim_flights import FlightPlan, monte_carlo  # the in-process JSBSim flights (optional)
@@ -182,6 +183,52 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(finite_or_none(out), allow_nan=False))
         return 0
     _print(plant, result, mc, args)
+    return 0
+
+
+def _predict(args: argparse.Namespace, plant, gains_file):
+    """Today's prediction for one plant and its gains file."""
+    from monitor.checks.detectability import detectability
+
+    return detectability(
+        plant,
+        gains_file.gains,
+        disturbance_bound=args.disturbance_bound,
+        turbulence=args.turbulence,
+        altitude_ft=args.altitude,
+        false_alarms_per_hour=args.false_alarms_per_hour,
+        within_s=args.within,
+        alarm_samples=args.alarm_samples,
+        probability=args.probability,
+        report_time_constant=getattr(gains_file, "fault_time_constant", None),
+    )
+
+
+def _run_envelope(args: argparse.Namespace, model) -> int:
+    """The prediction at every point (its plant, its gains), one line each, and the largest bias last."""
+    from monitor.checks.points import each_point, worst_point
+    from monitor.model.identification import finite_or_none
+
+    envelope = model.envelope
+    points = [(name, m.plant, m.gains) for name, m in zip(envelope.names, envelope.points, strict=True)]
+    results = each_point(points, lambda plant, gf: _predict(args, plant, gf))
+    unit = envelope.envelope.first.unit
+    rows = [
+        {"name": name, **r.as_dict(), "plant": m.plant.source, "gains": str(args.gains), "unit": unit}
+        for (name, r), m in zip(results, envelope.points, strict=True)
+    ]
+    worst, _ = worst_point(results, lambda r: r.bias)
+    if args.json:
+        out = {"points": rows, "worst": next(r for r in rows if r["name"] == worst)}
+        print(json.dumps(finite_or_none(out), allow_nan=False))
+        return 0
+    for name, r in results:
+        print(
+            f"point {name}: a bias of {r.bias:.4g} {unit} or more detected within {r.within_s:g} s at threshold "
+            f"{r.threshold:.4g} {unit}"
+        )
+    r = dict(results)[worst]
+    print(f"envelope: worst point {worst}: smallest detectable bias {r.bias:.4g} {unit} (threshold {r.threshold:.4g})")
     return 0
 
 
