@@ -134,7 +134,7 @@ def _plot(margin, path: str, plant) -> None:
     ax.axvline(margin.tau_max, color="k", linestyle="--", label=f"margin {margin.tau_max:.3f} s")
     ax.axvline(plant.tau_max, color="grey", linestyle=":", label=f"plant file tau_max {plant.tau_max}")
     ax.set_xlabel("tau_max [s]")
-    ax.set_ylabel("gamma_e (w -> e_f)")
+    ax.set_ylabel("gamma_e, the H-inf bound w -> e_f (deg per deg)")
     ax.set_title(f"Delay margin, {plant.name}")
     ax.legend(loc="best")
     fig.tight_layout()
