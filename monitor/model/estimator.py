@@ -29,6 +29,11 @@ goes back for the vehicle to add to its own controller's deflection. Past one sa
 lagged plant, ``monitor.model.long_delay``) the report at k is whichever command is in force, not u(k-1); the
 lagged model carries the commands in flight itself, so the estimator keeps its own last command and ignores
 the report (the certificate covers every arrival pattern).
+Known inputs (a plant's ``[known_inputs]``, ``monitor.model.known_inputs``): ``step``, ``observe`` and
+``compensate`` take ``known``, the continuous-time term vector at sample k (state units); with it, and a plant
+that has known inputs, the prediction gets ``Gamma known`` added, ``Gamma = int_0^h e^{A_c s} ds``:
+``x_hat(k+1) = ... + Gamma known(k)``. The certificates are unchanged: the known input drives the plant and the
+observer alike and cancels in the estimation error. A lost sample is predicted without it.
 Why saturate here: a command beyond the actuator's travel is not what acts on the plant, and an observer fed
 the unsaturated value would learn a fault that is not there.
 """
@@ -36,7 +41,7 @@ the unsaturated value would learn a fault that is not there.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from operator import mul
 from typing import TYPE_CHECKING
@@ -142,6 +147,8 @@ class Estimator:
         self._U_rows = self._U.tolist()
         self._compensation_rows = fault_compensation(plant).tolist()
         self._skipped = 0
+        ki = plant.known_inputs
+        self._gamma_rows: list[list[float]] | None = ki.gamma.tolist() if ki is not None else None
         self._O_rows = self._O.tolist()
         self._lim = float(self.u_limit) if self.u_limit is not None else None
         # per input: the saturation bounds in deviation coordinates
@@ -204,12 +211,20 @@ class Estimator:
         for i in range(n):
             z[i] += float(correction[i])
 
-    def _finish(self, s: EstimatorState, k: int, v: list[float], u: list[float]) -> StepResult:
-        """``v = [x_hat; f_hat; u(k-1); y]`` and the u(k) that acted: eq. (5), then the new state."""
+    def _finish(
+        self, s: EstimatorState, k: int, v: list[float], u: list[float], known: Sequence[float] | None = None
+    ) -> StepResult:
+        """``v = [x_hat; f_hat; u(k-1); y]`` and the u(k) that acted: eq. (5), then the new state (plus
+        ``Gamma known`` with known inputs)."""
         w = v + u
         out = [sum(map(mul, row, w)) for row in self._O_rows]
         n, nq = s.n, self._nq
         z_next = out[:nq] + u
+        gamma = self._gamma_rows
+        if known is not None and gamma is not None:
+            kv = [float(e) for e in known]
+            for i, row in enumerate(gamma):
+                z_next[i] += sum(map(mul, row, kv))
         reset = not all(map(math.isfinite, z_next))
         s.z = np.zeros(self._N) if reset else np.array(z_next)
         s.k_last = k
@@ -235,28 +250,44 @@ class Estimator:
         y: ArrayLike,
         u_prev: Iterable[float] | None = None,
         applied: bool | None = None,
+        known: Sequence[float] | None = None,
     ) -> StepResult:
         """Process sample k in place and return the command. Raises ValueError for a stale or duplicate k.
 
         ``u_prev``: the deflection the vehicle reports at k (None: the estimator's own last command);
-        ``applied``: whether that report shows the command for k-1 acted (False: see ``_advance``).
+        ``applied``: whether that report shows the command for k-1 acted (False: see ``_advance``);
+        ``known``: the known-input term vector at k (module docstring; ignored for a plant without known
+        inputs). It changes the prediction only: the certificates are unchanged (it cancels in the error).
         """
         v = self._advance(s, k, u_prev, applied) + [float(e) for e in np.ravel(y)]
         u = [sum(map(mul, row, v)) for row in self._U_rows]
         bounds = self._bounds
         if bounds is not None:
             u = [hi if e > hi else lo if e < lo else e for e, (lo, hi) in zip(u, bounds, strict=True)]
-        return self._finish(s, k, v, u)
+        return self._finish(s, k, v, u, known)
 
     def observe(
-        self, s: EstimatorState, k: int, y: ArrayLike, u_now: ArrayLike, u_prev: Iterable[float] | None = None
+        self,
+        s: EstimatorState,
+        k: int,
+        y: ArrayLike,
+        u_now: ArrayLike,
+        u_prev: Iterable[float] | None = None,
+        known: Sequence[float] | None = None,
     ) -> StepResult:
-        """Observe-only: eq. (5) with the u(k) the vehicle's own controller issued (no command computed)."""
+        """Observe-only: eq. (5) with the u(k) the vehicle's own controller issued (no command computed).
+        ``known``: as for ``step`` (the prediction only; the certificates are unchanged)."""
         v = self._advance(s, k, u_prev) + [float(e) for e in np.ravel(y)]
-        return self._finish(s, k, v, [float(e) for e in np.ravel(u_now)])
+        return self._finish(s, k, v, [float(e) for e in np.ravel(u_now)], known)
 
     def compensate(
-        self, s: EstimatorState, k: int, y: ArrayLike, u_total: ArrayLike, c_prev: Iterable[float]
+        self,
+        s: EstimatorState,
+        k: int,
+        y: ArrayLike,
+        u_total: ArrayLike,
+        c_prev: Iterable[float],
+        known: Sequence[float] | None = None,
     ) -> tuple[StepResult, list[float]]:
         """The autopilot flies, the monitor compensates: eq. (5), and the compensation ``c(k) = G f_hat(k)`` that
         the vehicle adds to its autopilot's deflection after the link's delay. ``G`` is eq. (6)'s fault term for
@@ -273,7 +304,8 @@ class Estimator:
         the autopilot's part alone: it is the deflection that acted, whoever commanded it; a compensation that
         was lost (the vehicle still holds an older one) is then only wrong in the split, by c(k-1) - c(k-2).
         The compensation uses the raw estimate (the loop's, not the low-passed reported one) and is limited to
-        the actuator's limit; the vehicle clips the total at the surface's travel.
+        the actuator's limit; the vehicle clips the total at the surface's travel. ``known``: as for ``step``
+        (the prediction only; the certificates are unchanged).
         """
         total = [float(e) for e in np.ravel(u_total)]
         v = self._advance(s, k, total) + [float(e) for e in np.ravel(y)]
@@ -283,4 +315,4 @@ class Estimator:
         if lim is not None:
             comp = [lim if c > lim else -lim if c < -lim else c for c in comp]
         u_now = [t - p + c for t, p, c in zip(total, c_prev, comp, strict=True)]
-        return self._finish(s, k, v, u_now), comp
+        return self._finish(s, k, v, u_now, known), comp

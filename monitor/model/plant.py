@@ -29,6 +29,7 @@ import numpy as np
 
 from monitor.errors import UserError
 from monitor.model.discretize import ContinuousModel, discretize
+from monitor.model.known_inputs import KnownInputs, parse_known_inputs
 from monitor.wire import TURBULENCE_LEVELS
 
 __all__ = [
@@ -59,6 +60,7 @@ _COMMON_KEYS = {
     "disturbance",
     "signals",
     "identification",
+    "known_inputs",
 }
 _CONTINUOUS_KEYS = _COMMON_KEYS | {"A_c", "B_c", "D_cf", "D_cd"}
 _DISCRETE_KEYS = _COMMON_KEYS | {"A", "B0", "B1", "Df", "Dd", "delta", "E"}
@@ -66,7 +68,8 @@ _ACTUATOR_KEYS = {"limit", "rate_limit"}
 _DISTURBANCE_KEYS = {"sigma", "time_constant", "turbulence", "source"}
 # tables that say nothing about the dynamics: left out of the digest, so gains stay valid when they are edited.
 # [identification] is what `fault-monitor identify` found (source log, fit, modes): information, never maths.
-_NOT_DYNAMICS = ("signals", "identification")
+# [known_inputs] (monitor.model.known_inputs) cancels in the estimation error: the gains do not depend on it.
+_NOT_DYNAMICS = ("signals", "identification", "known_inputs")
 
 
 @dataclass(frozen=True)
@@ -123,6 +126,7 @@ class Plant:
     signals: dict[str, Any] | None = None  # the raw [signals] table (validated by monitor.link.signals)
     raw: dict[str, Any] | None = field(default=None, repr=False)  # the parsed TOML, to derive variants
     lags: Lags | None = None  # tau_max >= h: the commands in flight are in the state (monitor.model.long_delay)
+    known_inputs: KnownInputs | None = None  # [known_inputs]: terms added to the prediction (physical state)
 
     @property
     def physical(self) -> Plant:
@@ -266,7 +270,8 @@ def plant_from_table(raw: dict[str, Any], source: str) -> Plant:
         D_cd = reader.matrix("D_cd", rows=n)
         model = ContinuousModel(A_c=A_c, B_c=B_c, D_cf=D_cf, D_cd=D_cd)
         d = discretize(model, h, 0.5 * (tau_min + tau_max))
-        return Plant(A=d.A, B0=d.B0, B1=d.B1, Df=d.Df, Dd=d.Dd, continuous=model, **common)
+        known = parse_known_inputs(raw, source, C, A_c, h)
+        return Plant(A=d.A, B0=d.B0, B1=d.B1, Df=d.Df, Dd=d.Dd, continuous=model, known_inputs=known, **common)
     A = reader.matrix("A", rows=n, cols=n)
     B0 = reader.matrix("B0", rows=n)
     B1 = reader.matrix("B1", rows=n, cols=B0.shape[1])
@@ -274,6 +279,7 @@ def plant_from_table(raw: dict[str, Any], source: str) -> Plant:
     Dd = reader.matrix("Dd", rows=n)
     delta = reader.scalar("delta", positive=True) if "delta" in raw else None
     E = reader.matrix("E") if "E" in raw else None
+    parse_known_inputs(raw, source, C, None, h)  # a discrete plant with [known_inputs]: one line
     if E is not None and E.shape[1] != B0.shape[1]:
         raise UserError(f"{source}: key 'E' must have {B0.shape[1]} column(s) (one per input), got {E.shape[1]}")
     if E is not None and E.shape[0] != n:
@@ -326,6 +332,7 @@ def _lagged_plant(raw: dict[str, Any], source: str, h: float, tau_min: float, ta
         signals=base.signals,
         raw=raw,
         lags=Lags(base=base, first=first, last=last),
+        known_inputs=base.known_inputs,
     )
 
 

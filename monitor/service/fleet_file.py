@@ -141,6 +141,13 @@ def _single(plant: Plant, gains: GainsFile, signals: SignalMap) -> VehicleModel:
                     f"{signals.source}: [signals] operating_point: '{name}' = {u0:g} is not inside the "
                     f"actuator limit +-{limit:g} of plant {plant.name}"
                 )
+    known = plant.known_inputs
+    missing = [n for n in known.names if n not in signals.measured] if known is not None else []
+    if missing:
+        raise UserError(
+            f"{signals.source}: [signals.measured] has no '{missing[0]}', which plant {plant.name}'s [known_inputs] "
+            f"terms read ({', '.join(known.names) if known is not None else ''})"
+        )
     return VehicleModel(
         plant,
         gains,

@@ -115,7 +115,10 @@ class Vehicle:
         self.state: EstimatorState = model.estimator.initial_state()
         self.alarm = Alarm(alarm)
         self.delay = DelayTracker()
-        needs = model.envelope.envelope.schedule if model.envelope is not None else ()
+        needs = tuple(model.envelope.envelope.schedule) if model.envelope is not None else ()
+        known = model.plant.known_inputs
+        if known is not None:  # the known inputs' signals (roll, r) are needed as the outputs are
+            needs = (*needs, *known.signals)
         self.assembler = SampleAssembler(model.signals, model.plant.h, observe=observe, wait_s=wait_s, needs=needs)
         self.route = route
         self.last_seen = self.first_seen = now
@@ -396,6 +399,8 @@ class VehicleTable:
         # the estimator works in deviations from the signal map's operating point (zero when it has none)
         y, u_report = sig.deviations(values)
         est = model.estimator
+        ki = est.plant.known_inputs  # [known_inputs]: the turn's terms from the sample's values (None: without)
+        known = ki.vector(values) if ki is not None else None
         applied = None
         compensation: list[float] | None = None
         if self.observe:
@@ -403,10 +408,10 @@ class VehicleTable:
             assert u_report is not None  # observe mode: a sample is complete only with its actuator report
             if self.compensate:
                 c_prev = vehicle.last_compensation or [0.0] * len(u_report)
-                result, compensation = est.compensate(vehicle.state, sample.k, y, u_report, c_prev)
+                result, compensation = est.compensate(vehicle.state, sample.k, y, u_report, c_prev, known)
                 vehicle.last_compensation = compensation
             else:
-                result = est.observe(vehicle.state, sample.k, y, u_report)
+                result = est.observe(vehicle.state, sample.k, y, u_report, known=known)
             u_abs = [values[name] for name in sig.actuator]
         else:
             if u_report is None:
@@ -414,7 +419,7 @@ class VehicleTable:
                 self.counters.no_report += 1
             elif est.plant.lags is None:  # past one sample the report is whichever command is in force
                 applied = self._judge_applied(vehicle, sample.k, u_report)
-            result = est.step(vehicle.state, sample.k, y, u_prev=u_report, applied=applied)
+            result = est.step(vehicle.state, sample.k, y, u_prev=u_report, applied=applied, known=known)
             vehicle.last_command = result.u.tolist()
             vehicle.last_command_k = sample.k
             u_abs = sig.absolute(vehicle.last_command)
