@@ -53,6 +53,8 @@ q = { field = "ATTITUDE.pitchspeed", scale = 57.29577951308232, unit = "deg/s" }
 theta = { field = "ATTITUDE.pitch", scale = 57.29577951308232, unit = "deg" }
 airspeed = { field = "VFR_HUD.airspeed", unit = "m/s" }
 elevator = { field = "ACTUATOR_OUTPUT_STATUS.actuator[0]", unit = "deg" }
+roll = { field = "ATTITUDE.roll", scale = 57.29577951308232, unit = "deg" }
+r = { field = "ATTITUDE.yawspeed", scale = 57.29577951308232, unit = "deg/s" }
 [signals.command]
 message = "SET_ACTUATOR_CONTROL_TARGET"
 channels = [1]
@@ -60,6 +62,7 @@ full_scale = [30.0]
 group = 0
 """
 
+KNOWN_INPUT_SIGNALS = ("roll", "r")  # recorded by the plant's map if the identify map measures them
 DEFAULT_ACTUATOR_LIMIT = 25.0
 TAU_MAX_FRACTION = 0.46  # of h: the paper's interval [0, 0.4612 h]
 _LONG_LOG_RECORDS = 20_000  # a log this long gets progress lines on stderr (a 5-min 20 Hz log has ~24,000)
@@ -104,7 +107,8 @@ def map_for(table: dict[str, Any], source: str, states: tuple[str, ...], layouts
         "instant": table.get("instant", "AOA_SSA"),
         "outputs": list(states),
         "actuator": list(actuator),
-        "measured": {s: measured[s] for s in (*states, actuator[0])},
+        # roll and r (recorded, not outputs) when the map has them: what a plant's [known_inputs] terms read
+        "measured": {s: measured[s] for s in (*states, actuator[0], *KNOWN_INPUT_SIGNALS) if s in measured},
         "command": table.get("command", tomllib.loads(IDENTIFY_SIGNALS_TOML)["signals"]["command"]),
     }
     if layouts is not None:
