@@ -30,6 +30,7 @@ from typing import Any
 
 from monitor.files import write_text_atomically
 from monitor.link.flight_log import FlightLog, log_spacing, read_flight
+from monitor.link.signals import contract_signals_toml
 from monitor.wire import TURBULENCE_LEVELS
 
 __all__ = [
@@ -43,26 +44,13 @@ __all__ = [
     "map_for",
 ]
 
-IDENTIFY_SIGNALS_TOML = """
-[signals]
-instant = "AOA_SSA"
-actuator = ["elevator"]
-[signals.measured]
-alpha = { field = "AOA_SSA.AOA", unit = "deg" }
-q = { field = "ATTITUDE.pitchspeed", scale = 57.29577951308232, unit = "deg/s" }
-theta = { field = "ATTITUDE.pitch", scale = 57.29577951308232, unit = "deg" }
-airspeed = { field = "VFR_HUD.airspeed", unit = "m/s" }
-elevator = { field = "ACTUATOR_OUTPUT_STATUS.actuator[0]", unit = "deg" }
-roll = { field = "ATTITUDE.roll", scale = 57.29577951308232, unit = "deg" }
-r = { field = "ATTITUDE.yawspeed", scale = 57.29577951308232, unit = "deg/s" }
-[signals.command]
-message = "SET_ACTUATOR_CONTROL_TARGET"
-channels = [1]
-full_scale = [30.0]
-group = 0
-"""
-
 KNOWN_INPUT_SIGNALS = ("roll", "r")  # recorded by the plant's map if the identify map measures them
+# identify's default map for an aircraft's telemetry: the longitudinal states, the elevator and what the turn's
+# known inputs need, built from the sample's one definition (monitor.wire.telemetry) as the live default map is
+IDENTIFY_SIGNALS_TOML = contract_signals_toml(
+    ["alpha", "q", "theta", "airspeed", "elevator", *KNOWN_INPUT_SIGNALS], ranges=False
+)
+
 DEFAULT_ACTUATOR_LIMIT = 25.0
 TAU_MAX_FRACTION = 0.46  # of h: the paper's interval [0, 0.4612 h]
 _LONG_LOG_RECORDS = 20_000  # a log this long gets progress lines on stderr (a 5-min 20 Hz log has ~24,000)
