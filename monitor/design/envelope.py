@@ -46,7 +46,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from monitor.design.lmi_blocks import brl_margin
+from monitor.design.lmi_blocks import brl_block, brl_margin
 from monitor.design.result import DesignResult
 from monitor.design.solve import EPS, PATHS, SEARCH_PATHS, Solved, SolveFailed, SolvePath, solve_checked, value_of
 from monitor.errors import DesignFailed, UserError
@@ -209,22 +209,6 @@ def _loops(plant: Plant, gains: Gains, vertices: list[np.ndarray]) -> list[LoopM
     return [closed_loop(plant, gains, v, steady=steady) for v in vertices]
 
 
-def _brl_block(X: Any, A: np.ndarray, B: np.ndarray, C: np.ndarray, g: Any) -> Any:
-    """The compact Bounded Real Lemma block (affine in X and g for fixed loop matrices), posed ``<= -EPS I``."""
-    import cvxpy as cp
-
-    N, nw, k = C.shape[1], B.shape[1], C.shape[0]
-    AXA, AXB, BXB = A.T @ X @ A, A.T @ X @ B, B.T @ X @ B
-    block = cp.bmat(
-        [
-            [AXA - X, AXB, C.T],
-            [AXB.T, BXB - g * np.eye(nw), np.zeros((nw, k))],
-            [C, np.zeros((k, nw)), -np.eye(k)],
-        ]
-    )
-    return 0.5 * (block + block.T) << -EPS * np.eye(N + nw + k)
-
-
 def common_certificate(
     loops: dict[str, list[LoopMatrices]], paths: tuple[SolvePath, ...] = PATHS, retry_infeasible: bool = True
 ) -> tuple[np.ndarray, float, Solved] | None:
@@ -236,7 +220,7 @@ def common_certificate(
     N = every[0].A.shape[0]
     P = cp.Variable((N, N), symmetric=True)
     g = cp.Variable(nonneg=True)
-    constraints = [P >> EPS * np.eye(N)] + [_brl_block(P, lp.A, lp.B, lp.C_ef, g) for lp in every]
+    constraints = [P >> EPS * np.eye(N)] + [brl_block(P, lp.A, lp.B, lp.C_ef, g) for lp in every]
     problem = cp.Problem(cp.Minimize(g), constraints)
 
     def claim() -> float:
@@ -305,7 +289,7 @@ def redesign_observers(
     slack: dict[str, tuple[Any, Any]] = {}
     for name, plant in plants.items():
         if name not in free:
-            constraints += [_brl_block(P, lp.A, lp.B, lp.C_ef, g) for lp in _loops(plant, gains[name], vertices[name])]
+            constraints += [brl_block(P, lp.A, lp.B, lp.C_ef, g) for lp in _loops(plant, gains[name], vertices[name])]
             continue
         G_o = cp.Variable((len(obs), len(obs)))
         G_c = cp.Variable((len(ctl), len(ctl)))
