@@ -65,3 +65,23 @@ def test_bad_statespace_inputs_are_one_line_errors():
     Discrete.dt = 0
     with pytest.raises(UserError, match="fault columns"):
         monitor.api.plant_from_statespace(Discrete(), h=1.0, tau_max=0.3, fault=(5,))
+
+
+def test_the_package_re_exports_exactly_the_api_lazily_and_for_type_checkers():
+    """monitor/__init__.py names the API twice, for its lazy __getattr__ and in a TYPE_CHECKING block for editors;
+    both must be monitor.api's __all__, or a name would be Any to an editor or missing at run time."""
+    import ast
+    from pathlib import Path
+
+    import monitor
+
+    tree = ast.parse(Path(monitor.__file__).read_text())
+    typed = {
+        alias.asname or alias.name
+        for node in ast.walk(tree)
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
+        for imp in node.body
+        if isinstance(imp, ast.ImportFrom) and imp.module == "monitor.api"
+        for alias in imp.names
+    }
+    assert set(monitor._API) == set(monitor.api.__all__) == typed

@@ -57,8 +57,8 @@ def _pack(name: str, values: list) -> bytes:
     return HEAD + bytes((mtype,)) + struct.pack("<" + "".join(_STRUCT[c] for c in fmt), *scaled)
 
 
-def _fmt(name: str) -> bytes:
-    mtype, fmt, cols = FORMATS[name]
+def _fmt(name: str, formats: dict[str, tuple[int, str, str]] = FORMATS) -> bytes:
+    mtype, fmt, cols = formats[name]
     length = 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in fmt))
     return HEAD + b"\x80" + struct.pack("<BB4s16s64s", mtype, length, name.encode(), fmt.encode(), cols.encode())
 
@@ -382,11 +382,7 @@ def test_a_format_record_naming_fewer_columns_than_fields_is_a_one_line_error(tm
     with open(path, "wb") as fh:
         fh.write(_fmt_fmt())
         for name in ("AOA", "RCOU"):
-            mtype, fmt, cols = corrupt[name]
-            length = 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in fmt))
-            fh.write(
-                HEAD + b"\x80" + struct.pack("<BB4s16s64s", mtype, length, name.encode(), fmt.encode(), cols.encode())
-            )
+            fh.write(_fmt(name, corrupt))
         fh.write(_pack("AOA", [T0_US, 1.0, 0.0]) + _pack("RCOU", [T0_US, 1500, 1500, 1200, 1500] + [0] * 10))
     dlog = open_dataflash(path)
     with pytest.raises(UserError, match=r"FMT record of AOA declares 3 fields but names 2 columns \(a corrupt log\)"):

@@ -18,6 +18,19 @@ ROOT = Path(__file__).resolve().parents[1]
 # the ground floor: every package may use these
 BASE = {"monitor.errors", "monitor.files", "monitor.config_file", "monitor.cli_logging", "monitor.process"}
 
+# the library below the entry points (layers 1-4 of docs/layout.md)
+LIBRARY = {
+    "monitor.wire",
+    "monitor.link",
+    "monitor.model",
+    "monitor.design",
+    "monitor.gains",
+    "monitor.checks",
+    "monitor.pipelines",
+    "monitor.service",
+    "monitor.scoring",
+}
+
 MAY_IMPORT: dict[str, set[str]] = {
     "monitor.errors": set(),
     "monitor.files": set(),
@@ -41,44 +54,9 @@ MAY_IMPORT: dict[str, set[str]] = {
         "monitor.service",
         "sim_vehicle",
     },
-    "monitor.demo": {
-        "monitor.wire",
-        "monitor.link",
-        "monitor.model",
-        "monitor.design",
-        "monitor.gains",
-        "monitor.checks",
-        "monitor.pipelines",
-        "monitor.service",
-        "monitor.scoring",
-        "monitor.jsbsim_flights",
-    },
-    "monitor.api": {
-        "monitor.wire",
-        "monitor.link",
-        "monitor.model",
-        "monitor.design",
-        "monitor.gains",
-        "monitor.checks",
-        "monitor.pipelines",
-        "monitor.service",
-        "monitor.scoring",
-        "monitor.demo",
-        "monitor.jsbsim_flights",
-    },
-    "monitor.commands": {
-        "monitor.wire",
-        "monitor.link",
-        "monitor.model",
-        "monitor.design",
-        "monitor.gains",
-        "monitor.checks",
-        "monitor.pipelines",
-        "monitor.service",
-        "monitor.scoring",
-        "monitor.demo",
-        "monitor.jsbsim_flights",
-    },
+    "monitor.demo": LIBRARY | {"monitor.jsbsim_flights"},
+    "monitor.api": LIBRARY | {"monitor.demo", "monitor.jsbsim_flights"},
+    "monitor.commands": LIBRARY | {"monitor.demo", "monitor.jsbsim_flights"},
     "monitor.cli": {"monitor.commands"},
     "monitor.__main__": {"monitor.cli"},
     # the vehicle knows the wire and the plant's description, never the estimator or the designs

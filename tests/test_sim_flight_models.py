@@ -3,17 +3,13 @@ event simulation, servo, faults, excitation and telemetry (sim_vehicle/flight_mo
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
 from monitor.config_file import parse_args_with_config
 from monitor.errors import UserError
 from monitor.model.plant import load_plant
-from monitor.wire.mavlink import new_codec, sample_index
 from monitor.wire.specs import Excitation, parse_delay_spec, parse_excite_spec, parse_fault_spec
-from monitor.wire.telemetry import AircraftSample, encode_sample
 from sim_vehicle.cli import build_parser
 from sim_vehicle.config import settings_from_args
 from sim_vehicle.dynamics import Airframe, LinearFlightModel
@@ -117,27 +113,3 @@ def test_an_aircraft_vehicle_file_sets_the_aircraft_flags(tmp_path):
         settings_from_args(
             parse_args_with_config(build_parser(), ["run", "--excite", "prbs:1:5", "--autopilot", "-0.5"])
         )
-
-
-def test_aircraft_telemetry_is_the_contract_plus_pitch_and_vfr_hud_in_one_datagram():
-    sample = AircraftSample(
-        sysid=3,
-        k=7,
-        t=0.35,
-        alpha_deg=1.25,
-        q_deg_s=-2.0,
-        elevator_deg=4.3,
-        theta_deg=3.0,
-        airspeed_m_s=51.4,
-        attitude=(0.01, 1.5, 0.002, -0.003),
-        hud=(51.0, 86.4, 71, 914.4, -0.2),
-    )
-    data = encode_sample(new_codec(3, 1), sample, 0.05)
-    msgs = {m.get_type(): m for m in new_codec(255, 190).parse_buffer(data)}
-    assert list(msgs) == ["ATTITUDE", "AOA_SSA", "VFR_HUD", "ACTUATOR_OUTPUT_STATUS"]
-    att, aoa, hud, act = msgs["ATTITUDE"], msgs["AOA_SSA"], msgs["VFR_HUD"], msgs["ACTUATOR_OUTPUT_STATUS"]
-    assert sample_index(aoa.time_usec, 0.05) == 7 and att.time_boot_ms == 350 and act.time_usec == 350_000
-    assert aoa.AOA == pytest.approx(1.25) and att.pitch == pytest.approx(math.radians(3.0))
-    assert att.pitchspeed == pytest.approx(math.radians(-2.0)) and att.roll == pytest.approx(0.01)
-    assert hud.airspeed == pytest.approx(51.4) and hud.heading == 86 and hud.throttle == 71
-    assert hud.alt == pytest.approx(914.4) and act.actuator[0] == pytest.approx(4.3)

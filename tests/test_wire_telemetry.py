@@ -3,6 +3,7 @@ agree, field for field, for both kinds of sample (the linear plant's and an airc
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 
@@ -12,7 +13,7 @@ from monitor.link.assembly import SampleAssembler
 from monitor.link.dialect import layout_by_id
 from monitor.link.frames import FrameCounters, FrameParser
 from monitor.link.signals import DEFAULT_SIGNALS_TOML, contract_signals_toml, parse_signals
-from monitor.wire.mavlink import new_codec
+from monitor.wire.mavlink import new_codec, sample_index
 from monitor.wire.telemetry import SAMPLE_FIELDS, AircraftSample, Sample, encode_sample, quantities, wire_values
 
 H = 0.05
@@ -75,3 +76,17 @@ def test_wire_values_are_what_the_encoder_puts_in_each_field() -> None:
         sent = getattr(msgs[message], field)
         sent = sent if index is None else sent[index]
         assert sent == pytest.approx(value, rel=1e-6, abs=0.5 if field in ("heading", "throttle") else 1e-6)
+
+
+def test_an_aircraft_sample_is_one_datagram_in_the_contract_s_order_stamped_with_its_instant() -> None:
+    """ATTITUDE, AOA_SSA, VFR_HUD, ACTUATOR_OUTPUT_STATUS in one datagram; every timed message at k h; VFR_HUD's
+    heading and throttle are whole numbers on the wire."""
+    sample = dataclasses.replace(AIRCRAFT, hud=(51.0, 86.4, 71, 914.4, -0.2))
+    msgs = {m.get_type(): m for m in new_codec(255, 190).parse_buffer(encode_sample(new_codec(3, 1), sample, H))}
+    assert list(msgs)[:4] == ["ATTITUDE", "AOA_SSA", "VFR_HUD", "ACTUATOR_OUTPUT_STATUS"]
+    att, aoa, hud, act = msgs["ATTITUDE"], msgs["AOA_SSA"], msgs["VFR_HUD"], msgs["ACTUATOR_OUTPUT_STATUS"]
+    assert sample_index(aoa.time_usec, H) == 7 and att.time_boot_ms == 350 and act.time_usec == 350_000
+    assert aoa.AOA == pytest.approx(1.25) and att.pitch == pytest.approx(math.radians(3.0))
+    assert att.pitchspeed == pytest.approx(math.radians(-2.0)) and att.roll == pytest.approx(0.01)
+    assert hud.airspeed == pytest.approx(51.4) and hud.heading == 86 and hud.throttle == 71
+    assert hud.alt == pytest.approx(914.4) and act.actuator[0] == pytest.approx(4.3)
