@@ -12,9 +12,9 @@ to the model's prediction each sample (integrated over the sample with the plant
 * alpha-dot += (g / V) cos(theta) (cos(phi) - 1): the share of gravity a banked wing no longer carries;
 * theta-dot += q (cos(phi) - 1) - r sin(phi): the Euler pitch rate, where the model has theta-dot = q.
 
-It prints the largest |f_hat| per mission segment for both. Why an experiment and not a feature: the terms change
-no certificate (a known input cancels in the estimation error), but they reach the live loop only with roll and
-yaw rate in the signal map and a plant format for known inputs, which is the envelope issue's next step.
+It prints the largest |f_hat| per mission segment for both. The live loop has the same terms (a plant's
+``[known_inputs]``, ``monitor.model.known_inputs``); this replay computes them with its own few lines, so that it
+is an independent check of what the monitor reports with them.
 """
 
 from __future__ import annotations

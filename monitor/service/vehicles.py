@@ -204,7 +204,7 @@ class Processed:
         self.command_applied = command_applied  # did the previous command act (None: cannot tell)?
         # the absolute deflection u0 + u(k): what goes on the wire (observe-only: what the vehicle reported)
         self.u_abs = u_abs if u_abs is not None else result.u.tolist()
-        self.compensation: list[float] | None = None  # --compensate: what is sent (K3 f_hat), added on board
+        self.compensation: list[float] | None = None  # --compensate: what is sent (G f_hat), added on board
         self.point: int | None = None  # an envelope model: the index of the point that stepped the sample
         self.inside: bool | None = None  # ... and whether its schedule values were inside the identified range
 
