@@ -51,6 +51,7 @@ our own, logged at DEBUG, and kept off the daemon's stdout.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import math
 import xml.etree.ElementTree as ET
@@ -126,8 +127,9 @@ def _import_jsbsim():
     return jsbsim
 
 
+@functools.cache
 def _logger_class(jsbsim):  # noqa: ANN001, ANN202 - the lazily imported module and a class made from it
-    """An ``FGLogger`` that hands each finished record (its text) to a Python callable."""
+    """An ``FGLogger`` that hands each finished record (its text) to a Python callable (the class made once)."""
 
     class RecordLogger(jsbsim.FGLogger):  # type: ignore[name-defined]  # a base from the module given at run time
         def __init__(self, on_record: Callable[[str], None]) -> None:
