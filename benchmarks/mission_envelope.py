@@ -31,39 +31,6 @@ import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-SETTLED_S = 15.0  # the last segment's last seconds: the new trim reached
-
-ID_MISSION = """
-[[segment]]
-name = "trim-high"
-duration = 20
-airspeed = {high}
-altitude = 3000
-bank = 0
-
-[[segment]]
-name = "id-high"
-duration = 60
-airspeed = {high}
-altitude = 3000
-bank = 0
-excite = "prbs:1:40"
-
-[[segment]]
-name = "to-low"
-duration = 50
-airspeed = {low}
-altitude = 3000
-bank = 0
-
-[[segment]]
-name = "id-low"
-duration = 60
-airspeed = {low}
-altitude = 3000
-bank = 0
-excite = "prbs:1:40"
-"""
 
 
 def _monitor(*args: str) -> subprocess.CompletedProcess:
@@ -148,53 +115,63 @@ def analyse(tlog: Path, plant: Path, gains: Path, rrd: Path) -> tuple[dict, list
     return report, rows
 
 
+def legs(mission: Path) -> list[tuple[str, float, float]]:
+    """The identification legs of ``mission`` (the segments with ``excite``): (name, start s, end s)."""
+    excited = {seg["name"] for seg in tomllib.loads(mission.read_text())["segment"] if "excite" in seg}
+    return [leg for leg in segments(mission) if leg[0] in excited]
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--mission", default=str(ROOT / "docs/examples/mission-short.toml"))
+    p.add_argument(
+        "--id-mission",
+        default=str(ROOT / "docs/examples/mission-identification.toml"),
+        help="the identification mission: each segment with an excite key is a leg, identified into one point",
+    )
+    p.add_argument(
+        "--schedule", action="append", help="the envelope's schedule signal(s) (default: airspeed); give twice for two"
+    )
+    p.add_argument("--model", default="short-period", help="identify's --model for every leg (default: short-period)")
     p.add_argument("--speedup", type=float, default=20.0)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--low", type=float, default=90.0, help="knots of the slow identification leg")
-    p.add_argument("--high", type=float, default=100.0, help="knots of the fast identification leg")
     p.add_argument("--work", help="keep the files here (default: a temporary directory)")
     args = p.parse_args()
+    schedule = args.schedule or ["airspeed"]
     work = Path(args.work) if args.work else Path(tempfile.mkdtemp(prefix="mission-envelope-"))
     work.mkdir(parents=True, exist_ok=True)
-    mission = Path(args.mission)
+    mission, id_mission = Path(args.mission), Path(args.id_mission)
 
     # 1-2. identification legs, plants, the envelope and the designs
-    id_mission = work / "identification.toml"
-    id_mission.write_text(ID_MISSION.format(high=args.high, low=args.low))
     id_log = work / "identification.tlog"
     took = log_flight(id_mission, id_log, args.speedup, args.seed)
     print(f"identification flight: {took:.1f} s", file=sys.stderr)
-    legs = {name: (a, b) for name, a, b in segments(id_mission)}
-    plants = {}
-    for leg, label in (("id-high", f"c172p-{args.high:g}kt"), ("id-low", f"c172p-{args.low:g}kt")):
-        a, b = legs[leg]
-        plants[leg] = work / f"{label}.toml"
-        _monitor("identify", str(id_log), "--out", str(plants[leg]), "--window", f"{a - 2:g}:{b:g}", "--name", label)
+    plants: list[Path] = []
+    for leg, a, b in legs(id_mission):
+        plants.append(work / f"c172p-{leg}.toml")
+        window = f"{a - 2:g}:{b:g}"
+        _monitor(
+            "identify", str(id_log), "--model", args.model, "--out", str(plants[-1]), "--window", window, "--name", leg
+        )
     env, env_gains, one_gains = work / "c172p-env.toml", work / "c172p-env-gains.toml", work / "c172p-one-gains.toml"
-    _monitor("envelope", str(plants["id-low"]), str(plants["id-high"]), "--schedule", "airspeed", "--out", str(env))
+    _monitor("envelope", *map(str, plants), *(a for s in schedule for a in ("--schedule", s)), "--out", str(env))
     start = time.monotonic()
     _monitor("design", "--plant", str(env), "--out", str(env_gains), "--jobs", "2", "--quiet")
     print(f"envelope design: {time.monotonic() - start:.1f} s", file=sys.stderr)
-    _monitor("design", "--plant", str(plants["id-high"]), "--out", str(one_gains), "--quiet")
+    one = plants[0]  # the first leg alone: the one-trim model
+    _monitor("design", "--plant", str(one), "--out", str(one_gains), "--quiet")
 
     # 3-4. the mission, and both models over its log
     flight = work / "mission.tlog"
     took = log_flight(mission, flight, args.speedup, args.seed)
     print(f"mission flight: {took:.1f} s", file=sys.stderr)
-    _one_report, one = analyse(flight, plants["id-high"], one_gains, work / "one.rrd")
+    _one_report, one_rows = analyse(flight, one, one_gains, work / "one.rrd")
     env_report, scheduled = analyse(flight, env, env_gains, work / "env.rrd")
     print(f"files in {work}")
-    print(f"{'segment':<14}{'one trim (' + plants['id-high'].stem + ')':>28}{'envelope':>12}")
+    print(f"{'segment':<14}{'one trim (' + one.stem + ')':>28}{'envelope':>12}")
     for name, a, b in segments(mission):
-        print(f"{name:<14}{max_fhat(one, a, b):>28.3f}{max_fhat(scheduled, a, b):>12.3f}")
-    print(f"{'whole flight':<14}{max_fhat(one, 0, 1e9):>28.3f}{max_fhat(scheduled, 0, 1e9):>12.3f}   (deg)")
-    name, _a, end = segments(mission)[-1]
-    label = f"{name}, last {SETTLED_S:g} s"
-    settled = (max_fhat(r, end - SETTLED_S, end) for r in (one, scheduled))
-    print(f"{label:<14}{next(settled):>{42 - len(label)}.3f}{next(settled):>12.3f}   (settled)")
+        print(f"{name:<14}{max_fhat(one_rows, a, b):>28.3f}{max_fhat(scheduled, a, b):>12.3f}")
+    print(f"{'whole flight':<14}{max_fhat(one_rows, 0, 1e9):>28.3f}{max_fhat(scheduled, 0, 1e9):>12.3f}   (deg)")
     e = env_report["envelope"]
     print(f"envelope {e['name']}: {e['samples']} samples, {e['outside']} outside the identified range")
     for point in e["points"]:

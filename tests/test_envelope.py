@@ -151,7 +151,7 @@ def test_envelope_command_assembles_points_sorted_by_the_schedule(tmp_path: Path
     err = capsys.readouterr().err.strip()
     assert "bare.toml: has no [signals] operating_point" in err and len(err.splitlines()) == 1
     assert main(["envelope", *files, "--schedule", "bank", "--out", str(tmp_path / "x.toml")]) == 2
-    assert "operating_point has no 'bank'" in capsys.readouterr().err
+    assert "operating_point and condition have no 'bank'" in capsys.readouterr().err
     assert not (tmp_path / "x.toml").exists()
 
 

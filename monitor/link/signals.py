@@ -142,7 +142,7 @@ def contract_signals_toml(
 # what the monitor reads from a vehicle when the plant file has no [signals]: the linear plant's sample
 DEFAULT_SIGNALS_TOML = contract_signals_toml(["alpha", "q", "elevator"], outputs=["alpha"])
 
-_TOP_KEYS = {"instant", "outputs", "actuator", "record", "measured", "command", "operating_point"}
+_TOP_KEYS = {"instant", "outputs", "actuator", "record", "measured", "command", "operating_point", "condition"}
 _SIGNAL_KEYS = {"field", "scale", "offset", "unit", "range", "hold"}
 DEFAULT_HOLD_S = 1.0  # a latest-value signal (no time field) older than this, in the vehicle's seconds, is not used
 _COMMAND_KEYS = {"message", "channels", "full_scale", "group"}
@@ -193,6 +193,9 @@ class SignalMap:
     operating_point: dict[str, float] | None = None  # plant units, every output and actuator signal (None: zero)
     y0: tuple[float, ...] = ()  # the operating point of the outputs, in the order of ``outputs`` (zeros if none)
     u0: tuple[float, ...] = ()  # ... and of the actuator signals
+    # the other measured signals where the model was identified (bank, yaw rate): the flight condition that an
+    # envelope can be scheduled on besides the operating point (None: not stated)
+    condition: dict[str, float] | None = None
 
     def __post_init__(self) -> None:
         op = self.operating_point or {}
@@ -201,15 +204,19 @@ class SignalMap:
         if len(self.u0) != len(self.actuator):
             object.__setattr__(self, "u0", tuple(float(op.get(n, 0.0)) for n in self.actuator))
 
-    def deviations(self, values: dict[str, float]) -> tuple[list[float], list[float] | None]:
-        """``y - y0`` and ``u - u0`` (None when the sample has no complete actuator report) for the estimator."""
-        y = [values[name] - y0 for name, y0 in zip(self.outputs, self.y0, strict=True)]
-        report = [values[name] - u0 for name, u0 in zip(self.actuator, self.u0, strict=True) if name in values]
+    def deviations(
+        self, values: dict[str, float], y0: Sequence[float] | None = None, u0: Sequence[float] | None = None
+    ) -> tuple[list[float], list[float] | None]:
+        """``y - y0`` and ``u - u0`` (None when the sample has no complete actuator report) for the estimator; the
+        map's own operating point unless a trim is given (an envelope's, interpolated between its points)."""
+        y = [values[name] - y0 for name, y0 in zip(self.outputs, self.y0 if y0 is None else y0, strict=True)]
+        u_trim = self.u0 if u0 is None else u0
+        report = [values[name] - u0 for name, u0 in zip(self.actuator, u_trim, strict=True) if name in values]
         return y, (report if len(report) == len(self.actuator) else None)
 
-    def absolute(self, u) -> list[float]:
+    def absolute(self, u, u0: Sequence[float] | None = None) -> list[float]:
         """A command in deviation coordinates as the absolute deflection that goes on the wire, ``u0 + u``."""
-        return [u0 + float(v) for u0, v in zip(self.u0, u, strict=True)]
+        return [trim + float(v) for trim, v in zip(self.u0 if u0 is None else u0, u, strict=True)]
 
     def describe_operating_point(self) -> str | None:
         """``operating point alpha 2.31 deg, ..., elevator -4.3 deg`` (None when the map has none)."""
@@ -386,6 +393,7 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int, layouts: Lay
                 "and the actuator report must be matched to its instant"
             )
     op = _operating_point(raw.get("operating_point"), where, measured, outs, act)
+    condition = _condition(raw.get("condition"), where, measured, (*outs, *act))
     record = _names(raw, "record", where, measured, default=list(measured))
     cmd = raw.get("command", {})
     if not isinstance(cmd, dict):
@@ -416,6 +424,7 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int, layouts: Lay
         time_fields,
         source,
         op,
+        condition=condition,
     )
 
 
@@ -452,6 +461,26 @@ def _operating_point(
             raise UserError(f"{w}: '{name}' = {value:g} is outside its range [{bounds[0]:g}, {bounds[1]:g}]")
         op[name] = float(value)
     return op
+
+
+def _condition(raw: Any, where: str, measured: dict[str, Signal], own: tuple[str, ...]) -> dict[str, float] | None:
+    """``condition = { roll = 45.0, r = 12.1 }``: measured signals other than the outputs and the actuator (those are
+    the operating point's), each a finite number in its unit: where the model was identified."""
+    if raw is None:
+        return None
+    w = f"{where} condition"
+    if not isinstance(raw, dict):
+        raise UserError(f"{w}: must be a table {{ name = value, ... }} of measured signals")
+    condition: dict[str, float] = {}
+    for name, value in raw.items():
+        if name not in measured:
+            raise UserError(f"{w}: names '{name}', which is not in [signals.measured]")
+        if name in own:
+            raise UserError(f"{w}: names '{name}', an output or actuator signal: its trim is in operating_point")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise UserError(f"{w}: '{name}' must be a finite number, got {value!r}")
+        condition[name] = float(value)
+    return condition
 
 
 def default_signal_map(outputs: int = 1, inputs: int = 1) -> SignalMap:

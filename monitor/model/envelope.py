@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from monitor.errors import UserError
+from monitor.model.flight_condition import DERIVED, needed_signals
 from monitor.model.plant import Plant, plant_from_table
 from monitor.model.plant_toml import _key, _value
 
@@ -293,17 +294,19 @@ def _check_signals(plant: Plant, where: str, schedule: tuple[str, ...], at: dict
     if not isinstance(measured, dict):
         raise UserError(f"{where}: [point.plant.signals] needs a [signals.measured] table")
     for var in schedule:
-        if var not in measured:
-            raise UserError(
-                f"{where}: schedule variable '{var}' is not a measured signal of its [signals] "
-                f"(measured: {', '.join(measured)})"
-            )
+        for signal in needed_signals([var]):
+            if signal not in measured:
+                raise UserError(
+                    f"{where}: schedule variable '{var}' "
+                    + (f"reads '{signal}', which " if signal != var else "")
+                    + f"is not a measured signal of its [signals] (measured: {', '.join(measured)})"
+                )
     for key in ("outputs", "actuator"):
         names = signals.get(key)
         if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
             raise UserError(f"{where}: [point.plant.signals] needs '{key}', a list of signal names")
-    op = signals.get("operating_point")
-    if isinstance(op, dict):
+    op = _trim_and_condition(signals)
+    if op:
         for var in schedule:
             value = op.get(var)
             if (
@@ -312,9 +315,29 @@ def _check_signals(plant: Plant, where: str, schedule: tuple[str, ...], at: dict
                 and abs(value - at[var]) > 1e-6 * max(1.0, abs(at[var]))
             ):
                 raise UserError(
-                    f"{where}: at {var} = {at[var]:g} but its [signals] operating_point has {var} = {value:g} "
-                    "(a scheduling signal of the operating point is scheduled at its trim value)"
+                    f"{where}: at {var} = {at[var]:g} but its [signals] {_holder(signals, var)} has {var} = "
+                    f"{value:g} (a scheduling signal of the operating point is scheduled at its trim value)"
                 )
+
+
+def _trim_and_condition(signals: dict[str, Any]) -> dict[str, Any]:
+    """A point's ``[signals] operating_point`` and ``condition`` in one table (their names never overlap), with
+    the flight-condition quantities they give (``monitor.model.flight_condition``): where its schedule values come
+    from (airspeed from the trim or the condition, bank and the bank's load factor from the condition)."""
+    both: dict[str, Any] = {}
+    for key in ("operating_point", "condition"):
+        table = signals.get(key)
+        if isinstance(table, dict):
+            both.update(table)
+    for name, derived in DERIVED.items():  # bank_load_factor from the condition's roll
+        if all(isinstance(both.get(s), (int, float)) and _finite(both[s]) for s in derived.inputs):
+            both[name] = derived.fn(both)
+    return both
+
+
+def _holder(signals: dict[str, Any], var: str) -> str:
+    """Which of ``[signals]``' tables holds ``var``'s trim value."""
+    return "operating_point" if var in (signals.get("operating_point") or {}) else "condition"
 
 
 def _check_shared(first: EnvelopePoint, point: EnvelopePoint, source: str) -> None:
@@ -362,6 +385,9 @@ def point_name(text: str) -> str:
     return name or "point"
 
 
+_INLINE_TABLES = ("operating_point", "condition")  # flat tables of [signals] that identify writes inline
+
+
 def _flat(value: Any) -> bool:
     return isinstance(value, dict) and not any(isinstance(v, (dict, list)) and _nested(v) for v in value.values())
 
@@ -384,7 +410,7 @@ def _table_lines(table: Mapping[str, Any], prefix: str, depth: int) -> list[str]
     for key, value in table.items():
         if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
             arrays.append((key, value))
-        elif isinstance(value, dict) and not (depth >= 1 and _flat(value) and (all_dicts or key == "operating_point")):
+        elif isinstance(value, dict) and not (depth >= 1 and _flat(value) and (all_dicts or key in _INLINE_TABLES)):
             subs.append((key, value))
         else:
             try:
@@ -430,19 +456,19 @@ def assemble_envelope(
     for point, plant in plants:
         if plant.raw is None:
             raise UserError(f"{plant.source}: not read from a plant file (no table to copy into the envelope)")
-        op = (plant.signals or {}).get("operating_point")
-        if not isinstance(op, dict):
+        op = _trim_and_condition(plant.signals or {})
+        if not op:
             raise UserError(
                 f"{plant.source}: has no [signals] operating_point; the schedule's signals ({', '.join(sched)}) must "
-                "be in every point's operating point"
+                "be in every point's operating point or flight condition"
             )
         at: dict[str, float] = {}
         for var in sched:
             value = op.get(var)
             if not isinstance(value, (int, float)) or not _finite(value):
                 raise UserError(
-                    f"{plant.source}: [signals] operating_point has no {var!r} (it has {', '.join(op)}); the "
-                    "schedule's signals must be in every point's operating point"
+                    f"{plant.source}: [signals] operating_point and condition have no {var!r} (they have "
+                    f"{', '.join(op)}); the schedule's signals must be in every point's operating point or condition"
                 )
             at[var] = float(value)
         rows.append((tuple(at[s] for s in sched), point, at, plant.raw))

@@ -80,12 +80,14 @@ def plant_toml(
     source_log: str,
     model: str,
     header: list[str] | None = None,
+    condition: dict[str, float] | None = None,
 ) -> str:
     """The plant file ``fault-monitor design`` / ``run`` take as it is (docs/reference/file-formats.md).
 
     ``signals`` is the ``[signals]`` table without ``operating_point`` (added here) and with ``measured`` and
     ``command`` sub-tables. ``D_cf = B_c`` (an elevator fault), ``D_cd`` = the alpha column of ``A_c`` (a
-    vertical gust is an angle-of-attack disturbance, in degrees), ``C`` = identity of the states.
+    vertical gust is an angle-of-attack disturbance, in degrees), ``C`` = identity of the states. ``condition``:
+    the other measured signals' means where the model was identified (``[signals] condition``), if any.
     """
     n = len(result.state_names)
     if "alpha" not in result.state_names:
@@ -116,6 +118,8 @@ def plant_toml(
         lines.append(f"{key} = {_value(value)}")
     op = {s: _round(result.operating_point[s], 7) for s in (*result.state_names, *result.input_names)}
     lines.append(f"operating_point = {_value(op)}")
+    if condition:
+        lines.append(f"condition = {_value({s: _round(v, 7) for s, v in condition.items()})}")
     for table in ("measured", "command"):
         if table in signals:
             lines.append(f"[signals.{table}]")

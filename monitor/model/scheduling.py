@@ -41,10 +41,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from monitor.model.envelope import Envelope
+from monitor.model.flight_condition import needed_signals, schedule_value
 
 __all__ = [
     "HYSTERESIS",
@@ -57,6 +59,7 @@ __all__ = [
     "state_offset",
     "rebase",
     "values_in_order",
+    "trim_weights",
 ]
 
 HYSTERESIS = 0.1  # switch when the new point is nearer by this fraction of the distance between the two points
@@ -75,6 +78,7 @@ class Schedule:
     high: np.ndarray
     below: np.ndarray
     above: np.ndarray
+    triangulation: Any = None  # scipy's Delaunay of the scaled points (two variables, not on one line), for trims
 
     def inside_range(self, i: int) -> tuple[float, float]:
         """The points' values of variable ``i`` (lowest, highest): the identified envelope as a message names it."""
@@ -92,14 +96,19 @@ def make_schedule(names: Sequence[str], points: Sequence[str], at: np.ndarray) -
     scale = np.ptp(at, axis=0)
     scale[scale == 0] = 1.0
     below, above = [], []
-    for column in at.T:
-        values = np.unique(column)
+    for column, spread in zip(at.T, np.ptp(at, axis=0), strict=True):
+        values = _levels(column, spread)
         if values.size < 2:  # one value across the points: this variable bounds nothing (module docstring)
             below.append(np.inf)
             above.append(np.inf)
         else:
             below.append(0.5 * (values[1] - values[0]))
             above.append(0.5 * (values[-1] - values[-2]))
+    triangulation = None
+    if _line_of(at / scale) is None:
+        from scipy.spatial import Delaunay
+
+        triangulation = Delaunay(at / scale)
     return Schedule(
         names=tuple(names),
         points=tuple(points),
@@ -109,7 +118,27 @@ def make_schedule(names: Sequence[str], points: Sequence[str], at: np.ndarray) -
         high=at.max(axis=0),
         below=np.array(below),
         above=np.array(above),
+        triangulation=triangulation,
     )
+
+
+LEVEL_TOLERANCE = 0.1  # of a variable's spread: points closer than this along it are at one level of it
+
+
+def _levels(column: np.ndarray, spread: float) -> np.ndarray:
+    """The distinct levels of one schedule variable across the points, values closer than ``LEVEL_TOLERANCE`` of
+    its spread counted as one (the first of them; the outermost is kept at each end). Why: the turn legs of an
+    identification flight are flown at the cruise speed and identified a few tenths of a knot apart; taken as
+    levels of their own, they would leave the envelope half a tenth of a knot of room above cruise."""
+    values = np.unique(column)
+    if values.size < 2:
+        return values
+    kept = [values[0]]
+    for v in values[1:]:
+        if v - kept[-1] > LEVEL_TOLERANCE * spread:
+            kept.append(v)
+    kept[-1] = values[-1]
+    return np.array(kept)
 
 
 def distances(schedule: Schedule, x: Sequence[float]) -> np.ndarray:
@@ -165,11 +194,66 @@ def rebase(z: np.ndarray, offset_from: np.ndarray, offset_to: np.ndarray) -> np.
 
 
 def values_in_order(schedule: Schedule, values: Mapping[str, float]) -> list[float] | None:
-    """The schedule's values from a sample's ``{name: value}`` in the schedule's order; None when one is absent."""
+    """The schedule's values from a sample's ``{name: value}`` in the schedule's order (a flight-condition
+    quantity such as ``bank_load_factor`` computed from its signals); None when one is absent."""
     out = []
     for name in schedule.names:
-        v = values.get(name)
-        if v is None:
+        if not all(s in values for s in needed_signals([name])):
             return None
-        out.append(float(v))
+        out.append(schedule_value(name, values))
     return out
+
+
+def trim_weights(schedule: Schedule, x: Sequence[float]) -> np.ndarray:
+    """Weights over the points (non-negative, summing to 1) that interpolate the points' trims at ``x``.
+
+    Linear: on one variable (or points that all lie on a line in the scaled schedule) between the two points
+    that bracket ``x`` along it; on two, barycentric in the Delaunay triangle of the scaled points that contains
+    ``x``. Outside the points' span (their hull) the nearest point alone (weight 1): no extrapolation of a trim.
+    A point's own place gives that point alone, so a single trim is what it was. Non-finite ``x``: the nearest
+    point cannot be told either, and the first point's weight is 1 (the caller keeps its point then)."""
+    xs = np.asarray(x, dtype=float)
+    n = len(schedule.points)
+    w = np.zeros(n)
+    if not np.all(np.isfinite(xs)):
+        w[0] = 1.0
+        return w
+    scaled = schedule.at / schedule.scale
+    p = xs / schedule.scale
+    line = _line_of(scaled)
+    if line is not None:
+        origin, direction = line
+        s = (scaled - origin) @ direction
+        t = float((p - origin) @ direction)
+        order = np.argsort(s)
+        if t <= s[order[0]]:
+            w[order[0]] = 1.0
+        elif t >= s[order[-1]]:
+            w[order[-1]] = 1.0
+        else:
+            hi = int(np.searchsorted(s[order], t))
+            a, b = order[hi - 1], order[hi]
+            lam = (t - s[a]) / (s[b] - s[a]) if s[b] > s[a] else 0.0
+            w[a], w[b] = 1.0 - lam, lam
+        return w
+    tri = schedule.triangulation
+    simplex = int(tri.find_simplex(p))
+    if simplex < 0:
+        w[int(np.argmin(distances(schedule, [float(v) for v in xs])))] = 1.0
+        return w
+    vertices = tri.simplices[simplex]
+    T = tri.transform[simplex]
+    bary = T[:2] @ (p - T[2])
+    lam = np.clip(np.append(bary, 1.0 - bary.sum()), 0.0, 1.0)
+    w[vertices] = lam / lam.sum()
+    return w
+
+
+def _line_of(scaled: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(origin, unit direction)`` when the scaled points lie on one line (one variable, or collinear), else None."""
+    origin = scaled.mean(axis=0)
+    centred = scaled - origin
+    _u, sv, vt = np.linalg.svd(centred, full_matrices=False)
+    if scaled.shape[1] == 1 or len(sv) < 2 or sv[1] <= 1e-9 * max(sv[0], 1e-300):
+        return origin, vt[0]
+    return None

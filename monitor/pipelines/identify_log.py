@@ -45,6 +45,9 @@ __all__ = [
 ]
 
 KNOWN_INPUT_SIGNALS = ("roll", "r")  # recorded by the plant's map if the identify map measures them
+# the flight condition (``[signals] condition``): recorded, and averaged over the identified stretch, when the map
+# measures them and they are not states: what an envelope is scheduled on (airspeed, bank) and the known inputs read
+CONDITION_SIGNALS = ("airspeed", *KNOWN_INPUT_SIGNALS)
 # identify's default map for an aircraft's telemetry: the longitudinal states, the elevator and what the turn's
 # known inputs need, built from the sample's one definition (monitor.wire.telemetry) as the live default map is
 IDENTIFY_SIGNALS_TOML = contract_signals_toml(
@@ -95,8 +98,10 @@ def map_for(table: dict[str, Any], source: str, states: tuple[str, ...], layouts
         "instant": table.get("instant", "AOA_SSA"),
         "outputs": list(states),
         "actuator": list(actuator),
-        # roll and r (recorded, not outputs) when the map has them: what a plant's [known_inputs] terms read
-        "measured": {s: measured[s] for s in (*states, actuator[0], *KNOWN_INPUT_SIGNALS) if s in measured},
+        # airspeed, roll and r (recorded, not outputs) when the map has them: the flight condition
+        "measured": {
+            s: measured[s] for s in dict.fromkeys((*states, actuator[0], *CONDITION_SIGNALS)) if s in measured
+        },
         "command": table.get("command", tomllib.loads(IDENTIFY_SIGNALS_TOML)["signals"]["command"]),
     }
     if layouts is not None:
@@ -398,6 +403,7 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
         source_log=str(req.log),
         model=req.model,
         header=header,
+        condition=_condition(rows, written),
     )
     parse_plant(text, source=str(out))  # the file must load as it is: a plant the chain takes
     try:
@@ -405,6 +411,21 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
     except OSError as exc:
         raise UserError(f"{out}: cannot write the plant file: {exc.strerror or exc}") from None
     return IdentifiedLog(req, result, sysid, tau_max, units, flight, seconds)
+
+
+def _condition(rows: Rows, written: dict[str, Any]) -> dict[str, float]:
+    """The flight condition of the identified stretch (``[signals] condition``): the mean of each measured signal
+    that is not a state or the actuator (roll, r) over the rows that have it. A leg flown in a turn says so, and
+    ``fault-monitor envelope --schedule roll`` can place it."""
+    import numpy as np
+
+    condition: dict[str, float] = {}
+    for name in CONDITION_SIGNALS:
+        if name in written["measured"] and name not in written["outputs"]:
+            values = [v[name] for _k, v in rows if name in v and math.isfinite(v[name])]
+            if values:
+                condition[name] = float(np.mean(values))
+    return condition
 
 
 def _measure_air(req: IdentifyRequest, kept, k, X, U, states, sysid: int):

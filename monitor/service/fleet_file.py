@@ -74,15 +74,24 @@ class EnvelopeModel:
     points: tuple[VehicleModel, ...]
     schedule: Schedule
     offsets: tuple[np.ndarray, ...]
+    # the same offsets, and the points' output and actuator trims, one row per point: what the trims interpolated
+    # between the points are weighted sums of (monitor.model.scheduling.trim_weights)
+    offset_rows: np.ndarray
+    y0_rows: np.ndarray
+    u0_rows: np.ndarray
 
     @property
     def names(self) -> tuple[str, ...]:
         return self.envelope.names
 
+    def unit(self, name: str) -> str:
+        """The unit of schedule variable ``name``: its signal's, or a flight-condition quantity's (none)."""
+        measured = self.points[0].signals.measured
+        return measured[name].unit if name in measured else ""
+
     def describe(self) -> str:
         """``envelope c172p scheduled by airspeed: slow (airspeed 36 m/s), cruise (airspeed 51.4 m/s)``."""
-        signals = self.points[0].signals
-        units = {n: signals.measured[n].unit for n in self.envelope.schedule}
+        units = {n: self.unit(n) for n in self.envelope.schedule}
         places = ", ".join(
             f"{p.name} ("
             + ", ".join(f"{n} {p.at[n]:.6g}" + (f" {units[n]}" if units[n] else "") for n in self.envelope.schedule)
@@ -202,7 +211,16 @@ def load_envelope_model(
         )
         for m in points
     )
-    scheduled = EnvelopeModel(envelope, gains, tuple(points), schedule_of(envelope), offsets)
+    scheduled = EnvelopeModel(
+        envelope,
+        gains,
+        tuple(points),
+        schedule_of(envelope),
+        offsets,
+        np.array(offsets),
+        np.array([m.signals.y0 for m in points], dtype=float),
+        np.array([m.signals.u0 for m in points], dtype=float),
+    )
     first = points[0]
     return VehicleModel(first.plant, first.gains, first.estimator, first.signals, scheduled)
 

@@ -188,7 +188,7 @@ def envelope_report(env: EnvelopeModel, records: list[SampleRecord]) -> dict[str
     return {
         "name": env.envelope.name,
         "schedule": list(names),
-        "units": [env.points[0].signals.measured[n].unit for n in names],
+        "units": [env.unit(n) for n in names],
         "points": [
             {"name": p.name, "at": p.at, "samples": used[i], "outside": outside[i]}
             for i, p in enumerate(env.envelope.points)

@@ -40,9 +40,12 @@ import math
 from collections import deque
 from dataclasses import dataclass, fields
 
+import numpy as np
+
 from monitor.link.assembly import AssembledSample, AssemblyCounters, SampleAssembler
 from monitor.model.estimator import EstimatorState, StepResult
-from monitor.model.scheduling import choose_point, outside_variables, rebase
+from monitor.model.flight_condition import needed_signals, schedule_value
+from monitor.model.scheduling import choose_point, outside_variables, rebase, trim_weights
 from monitor.service.alarm import Alarm, AlarmConfig
 from monitor.service.delay import DelayTracker
 from monitor.service.fleet_file import EnvelopeModel, Fleet, VehicleModel
@@ -96,6 +99,7 @@ class Vehicle:
         "outside_samples",
         "outside_episode",
         "switches",
+        "trim",
     )
 
     def __init__(
@@ -115,7 +119,7 @@ class Vehicle:
         self.state: EstimatorState = model.estimator.initial_state()
         self.alarm = Alarm(alarm)
         self.delay = DelayTracker()
-        needs = tuple(model.envelope.envelope.schedule) if model.envelope is not None else ()
+        needs = needed_signals(model.envelope.envelope.schedule) if model.envelope is not None else ()
         known = model.plant.known_inputs
         if known is not None:  # the known inputs' signals (roll, r) are needed as the outputs are
             needs = (*needs, *known.signals)
@@ -140,6 +144,9 @@ class Vehicle:
         self.outside_samples = 0  # samples outside the envelope, in all and in the current episode
         self.outside_episode = 0
         self.switches = 0  # point switches
+        # an envelope model: (state offset, y0, u0) of the trim interpolated at the last sample, the deviations'
+        # origin (None before the first sample)
+        self.trim: tuple[np.ndarray, tuple[float, ...], tuple[float, ...]] | None = None
 
 
 @dataclass
@@ -396,8 +403,11 @@ class VehicleTable:
             sig = model.signals
         for name in [n for n, v in values.items() if not math.isfinite(v)]:
             del values[name]  # a non-finite recorded-only signal is not recorded
-        # the estimator works in deviations from the signal map's operating point (zero when it has none)
-        y, u_report = sig.deviations(values)
+        # the estimator works in deviations from the signal map's operating point (zero when it has none), or from
+        # an envelope's trim interpolated at the sample
+        trim = vehicle.trim
+        y0, u0 = (trim[1], trim[2]) if trim is not None else (None, None)
+        y, u_report = sig.deviations(values, y0, u0)
         est = model.estimator
         ki = est.plant.known_inputs  # [known_inputs]: the turn's terms from the sample's values (None: without)
         known = ki.vector(values) if ki is not None else None
@@ -422,7 +432,7 @@ class VehicleTable:
             result = est.step(vehicle.state, sample.k, y, u_prev=u_report, applied=applied, known=known)
             vehicle.last_command = result.u.tolist()
             vehicle.last_command_k = sample.k
-            u_abs = sig.absolute(vehicle.last_command)
+            u_abs = sig.absolute(vehicle.last_command, u0)
             lim = est.u_limit
             if lim is not None:  # u was saturated for u0 + u; this only takes off the last bit of rounding
                 u_abs = [lim if v > lim else -lim if v < -lim else v for v in u_abs]
@@ -451,18 +461,28 @@ class VehicleTable:
         """The envelope's point for this sample and whether it is inside the identified range (module docstring);
         on a switch the vehicle's estimator state and last command are re-based into the new point's deviations."""
         sched = env.schedule
-        x = [float(values.get(name, math.nan)) for name in sched.names]
+        x = [schedule_value(name, values) for name in sched.names]
         out = outside_variables(sched, x)
         previous = vehicle.point
-        if all(map(math.isfinite, x)):
+        finite = all(map(math.isfinite, x))
+        if finite:
             point = choose_point(sched, x, previous)
         else:  # no usable value: the point stays (the first sample's: the first point)
             point = previous if previous is not None else 0
+        if finite or vehicle.trim is None:  # the trim, interpolated; without a value it stays where it was
+            weights = trim_weights(sched, x) if finite else np.eye(len(sched.points))[point]
+            trim = (
+                weights @ env.offset_rows,
+                tuple(float(v) for v in weights @ env.y0_rows),
+                tuple(float(v) for v in weights @ env.u0_rows),
+            )
+            if vehicle.trim is not None:  # re-base the state (and the last command) into the new trim's deviations
+                vehicle.state.z = rebase(vehicle.state.z, vehicle.trim[0], trim[0])
+                if vehicle.last_command is not None:  # judged against the next report in the new deviations
+                    old, new = vehicle.trim[2], trim[2]
+                    vehicle.last_command = [c + a - b for c, a, b in zip(vehicle.last_command, old, new, strict=True)]
+            vehicle.trim = trim
         if previous is not None and point != previous:
-            vehicle.state.z = rebase(vehicle.state.z, env.offsets[previous], env.offsets[point])
-            if vehicle.last_command is not None:  # a deviation too: judged against the next report in the new one
-                old, new = env.points[previous].signals.u0, env.points[point].signals.u0
-                vehicle.last_command = [c + a - b for c, a, b in zip(vehicle.last_command, old, new, strict=True)]
             vehicle.switches += 1
             log.info(
                 "vehicle %d: envelope point %s -> %s at k=%d (%s)",
@@ -606,7 +626,7 @@ def _alive(route: object) -> bool:
 
 
 def _unit(env: EnvelopeModel, name: str) -> str:
-    unit = env.points[0].signals.measured[name].unit
+    unit = env.unit(name)
     return f" {unit}" if unit else ""
 
 
