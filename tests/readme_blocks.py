@@ -13,7 +13,8 @@ opening fence:
     <!-- readme: run GROUP; not run: CMD (REASON) -->   the same, except the lines that start with CMD
     <!-- readme: file NAME -->               a file the user saves as NAME: parsed, and present in every run directory
     <!-- readme: signals mavlink -->         a [signals] table, read by the project's own map reader (the MAVLink
-    <!-- readme: signals dataflash -->       dialect, or an ArduPilot DataFlash log's messages)
+    <!-- readme: signals dataflash -->       dialect, an ArduPilot DataFlash log's messages, or the topics of
+    <!-- readme: signals ulog -->            PX4's ULog sample tests/data/ulog/sample_log_small.ulg)
     <!-- readme: output -->                  nothing to type: what a program prints, a diagram, a listing
     <!-- readme: not run: REASON -->         not run, for REASON; its fault-monitor and sim-vehicle lines must still
                                              parse with the real argument parsers
@@ -74,7 +75,7 @@ _FENCE = re.compile(r"^```(\S*)\s*$")
 _KINDS = {
     "run": re.compile(r"run (?P<group>[\w-]+)(?:; not run: (?P<skip>[^(]+?) \((?P<why>[^)]+)\))?"),
     "file": re.compile(r"file (?P<name>\S+)"),
-    "signals": re.compile(r"signals (?P<layouts>mavlink|dataflash)"),
+    "signals": re.compile(r"signals (?P<layouts>mavlink|dataflash|ulog)"),
     "output": re.compile(r"output"),
     "not run": re.compile(r"not run: (?P<why>\S.*)"),
 }

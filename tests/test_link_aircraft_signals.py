@@ -123,7 +123,10 @@ def test_without_an_operating_point_the_values_are_the_deviations() -> None:
             lambda r: r["measured"].update(elevator={"field": "VFR_HUD.throttle"}),
             "actuator 'elevator': VFR_HUD has no time_usec or time_boot_ms",
         ),
-        (lambda r: r["measured"]["alpha"].update(hold=0.5), "'hold' is for a message without a time field"),
+        (
+            lambda r: r["measured"]["elevator"].update(hold=0.5),
+            "actuator 'elevator': 'hold' makes it a latest value, and the actuator report must be matched",
+        ),
         (lambda r: r["measured"]["airspeed"].update(hold=0), "'hold' must be a positive number of seconds"),
         (lambda r: r.update(instant="VFR_HUD"), "needs a time_usec field"),
     ],

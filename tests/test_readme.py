@@ -113,6 +113,10 @@ def _layouts(kind: str):
         from monitor.link.signals import MAVLINK
 
         return MAVLINK
+    if kind == "ulog":
+        from monitor.link.ulog import open_ulog
+
+        return open_ulog(Path(__file__).parent / "data" / "ulog" / "sample_log_small.ulg").layouts
     from pymavlink.DFReader import DFFormat
 
     from monitor.link.dataflash import DataFlashLayouts

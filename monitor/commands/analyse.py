@@ -12,19 +12,22 @@ __all__ = ["register"]
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "analyse",
-        help="observe-only fault estimation over a flight log (.tlog, or DataFlash .bin/.log), offline",
+        help="observe-only fault estimation over a flight log (.tlog, DataFlash .bin/.log, ULog .ulg), offline",
         description=(
             "Run the observer (eq. 5) over a flight's telemetry log as MAVProxy or QGroundControl write it "
             "(8-byte big-endian microsecond time + one MAVLink 1 or 2 frame per record), or over an ArduPilot "
             "on-board DataFlash log (.bin, or its text form .log; --signals names its messages, e.g. AOA.AOA, "
-            "TimeUS is the clock), with u(k) read from the vehicle's actuator report: the same assembler and "
+            "TimeUS is the clock) or a PX4 ULog log (.ulg; --signals names its topics, timestamp is the clock), "
+            "with u(k) read from the vehicle's actuator report: the same assembler and "
             "estimator as 'run --observe'. Prints the report of 'fault-monitor replay' and what the log holds; "
             "--rrd also writes the recording in the same layout as 'run'."
         ),
         epilog="Example: fault-monitor analyse flight.tlog --plant paper-continuous --gains gains.toml "
         "--rrd flight.rrd --fault bias:2@20",
     )
-    p.add_argument("tlog", metavar="FLIGHT.tlog", help="the telemetry log (.tlog), or a DataFlash log (.bin, .log)")
+    p.add_argument(
+        "tlog", metavar="FLIGHT.tlog", help="the telemetry log (.tlog), a DataFlash log (.bin, .log) or a ULog (.ulg)"
+    )
     from monitor.commands.run import add_alarm_arguments, add_model_arguments
 
     add_model_arguments(p, fleet=False)
@@ -58,9 +61,9 @@ def run(args: argparse.Namespace) -> int:
         parse_fault_spec(args.fault)  # a bad SPEC is a one-line error before the work starts
     if not Path(args.tlog).is_file():
         raise UserError(f"{args.tlog}: no such log file")
-    from monitor.link.dataflash import dataflash_kind, open_dataflash
+    from monitor.link.onboard_log import open_onboard_log
 
-    dlog = open_dataflash(args.tlog) if dataflash_kind(args.tlog) else None  # an on-board DataFlash log
+    dlog = open_onboard_log(args.tlog)  # an on-board log (DataFlash or ULog), None for a tlog
     fleet = load_models(args, layouts=dlog.layouts if dlog is not None else None)
     alarm = alarm_from_args(args, fleet)
     model = fleet.default

@@ -19,7 +19,7 @@ __all__ = ["register"]
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "identify",
-        help="identify a continuous plant from a flight log (.tlog, or DataFlash .bin/.log) with an elevator manoeuvre",
+        help="identify a continuous plant from a flight log (.tlog, .bin/.log, .ulg) with an elevator manoeuvre",
         description=(
             "Fit x' = A_c x + B_c u (deviations from the operating point) to a telemetry log of a flight with an "
             "elevator manoeuvre (e.g. sim-vehicle run --excite prbs:1:60), every state measured: least squares on "
@@ -28,7 +28,9 @@ def register(subparsers) -> None:
             "output, NRMSE). Writes a plant file that 'fault-monitor design' takes as it is, with its signal map "
             "and operating point. Exit 2 with one line when the log cannot be identified from (no excitation, "
             "missing signals, too short). An ArduPilot on-board DataFlash log (.bin, or its text form .log) is read "
-            "too, with --signals naming its own messages (e.g. AOA.AOA, RATE.P, RCOU.C2) and TimeUS as the clock."
+            "too, with --signals naming its own messages (e.g. AOA.AOA, RATE.P, RCOU.C2) and TimeUS as the clock; "
+            "so is a PX4 ULog log (.ulg), with --signals naming its topics (e.g. vehicle_angular_velocity.xyz[1]) "
+            "and timestamp as the clock."
         ),
         epilog="Example: fault-monitor identify flight.tlog --out c172p.toml && "
         "fault-monitor design --plant c172p.toml --out gains.toml",
@@ -36,7 +38,7 @@ def register(subparsers) -> None:
     p.add_argument(
         "tlog",
         metavar="FLIGHT.tlog",
-        help="the telemetry log (MAVProxy / QGroundControl format), or a DataFlash log (.bin, .log)",
+        help="the telemetry log (MAVProxy / QGroundControl format), a DataFlash log (.bin, .log) or a ULog (.ulg)",
     )
     p.add_argument("--out", required=True, metavar="PLANT.toml", help="the plant file to write")
     p.add_argument(

@@ -192,9 +192,7 @@ class SampleAssembler:
         """A message without a time field: its values become the vehicle's latest; a pending sample that only
         lacked them is released: the newest such (older ones not already waiting for their actuator report are
         dropped: answering a burst of old instants helps no one, and a datagram buys one answer anyway)."""
-        stamp = self._latest_us
-        for name, pos, scale, offset, _hold in self._held_parts[message]:
-            self._held[name] = (scale * values[pos] + offset, stamp)
+        self._set_held(message, values)
         if not self._held_outputs:
             return []
         ready = [k for k, s in self._pending.items() if s.deadline is None and self._complete(s)]
@@ -208,6 +206,16 @@ class SampleAssembler:
             slot.deadline = now + self.wait_s
             return []
         return self._emit_through(k, now)
+
+    def _set_held(self, message: str, values: tuple) -> None:
+        """The message's latest values, stamped with its own time field if it has one (a slower stream given a
+        ``hold``), else with the newest instant heard (VFR_HUD)."""
+        stamp = self._latest_us
+        own = self.signals.time_fields.get(message)
+        if own is not None:
+            stamp = self._instant_us(int(values[own[0]]), own[1], own[2] if len(own) > 2 else 0)
+        for name, pos, scale, offset, _hold in self._held_parts[message]:
+            self._held[name] = (scale * values[pos] + offset, stamp)
 
     def _drop(self, slot: _Slot) -> None:
         c = self.counters
@@ -265,6 +273,8 @@ class SampleAssembler:
                 self.seen.add(message)
                 return self._add_held(message, values, now)
             return []
+        if message in self._held_parts:  # a timed message some of whose signals are latest values
+            self._set_held(message, values)
         self.seen.add(message)
         t_pos, unit_us, wrap, signals = spec
         t_us = self._instant_us(int(values[t_pos]), unit_us, wrap)

@@ -6,7 +6,8 @@ not have (a MAVLink 1 log has no ``AOA_SSA``; an ArduCopter sends ``SERVO_OUTPUT
 signal, turns "no sample" into a signal map the user can write. ``analyse`` and ``identify`` feed the
 inventory from the pass they make anyway (``add_frames``, per record), so it costs no second read;
 ``read_inventory`` is the same pass on its own. DataFlash logs fill the same inventory by message name (no
-system ids, no MAVLink version), from their reader's per-message counts (``add_counts``).
+system ids, no MAVLink version), from their reader's per-message counts (``add_counts``); so do ULog logs
+(PX4), by topic instance (``actuator_outputs[1]``), with the log's dropouts.
 
 Rates are counts over the log's time span (first to last record time stamp), so a message sent in bursts
 or only part of the flight shows its average, not its peak.
@@ -49,6 +50,8 @@ SIGNAL_KINDS: dict[str, tuple[str, ...]] = {
         "AHR2",
         "CTUN",
         "SIM",
+        "vehicle_attitude",
+        "vehicle_attitude_groundtruth",
     ),
     "body rates (gyro)": (
         "ATTITUDE",
@@ -62,8 +65,28 @@ SIGNAL_KINDS: dict[str, tuple[str, ...]] = {
         "PIDP",
         "IMU",
         "GYR",
+        "vehicle_angular_velocity",
+        "sensor_combined",
     ),
-    "airspeed": ("VFR_HUD", "AIRSPEED", "SCALED_PRESSURE", "HIL_STATE", "ARSP", "CTUN"),
+    "airspeed": (
+        "VFR_HUD",
+        "AIRSPEED",
+        "SCALED_PRESSURE",
+        "HIL_STATE",
+        "ARSP",
+        "CTUN",
+        "airspeed_validated",
+        "airspeed",
+    ),
+    "velocity (for a derived angle of attack)": (
+        "LOCAL_POSITION_NED",
+        "GLOBAL_POSITION_INT",
+        "HIL_STATE_QUATERNION",
+        "NKF1",
+        "XKF1",
+        "vehicle_local_position",
+        "vehicle_local_position_groundtruth",
+    ),
     "actuator output": (
         "ACTUATOR_OUTPUT_STATUS",
         "SERVO_OUTPUT_RAW",
@@ -72,6 +95,9 @@ SIGNAL_KINDS: dict[str, tuple[str, ...]] = {
         "HIL_CONTROLS",
         "RCOU",
         "CTUN",
+        "actuator_servos",
+        "actuator_outputs",
+        "actuator_controls_0",
     ),
 }
 _KIND_BY_SIGNAL_NAME = {
@@ -99,7 +125,8 @@ class LogInventory:
     """Counts of one log: records, frames by MAVLink version, per (system id, message), time span."""
 
     def __init__(self, kind: str = "tlog") -> None:
-        self.kind = kind  # "tlog" or "dataflash"
+        self.kind = kind  # "tlog", "dataflash" or "ulog"
+        self.dropouts = 0  # a ULog log's dropout markers (the logger lost data there)
         self.records = 0
         self.frames_v1 = 0
         self.frames_v2 = 0
@@ -123,7 +150,8 @@ class LogInventory:
         self.frames_v2 += len(frames) - v1
 
     def add_counts(self, name: str, count: int, first_us: int | None, last_us: int | None) -> None:
-        """A DataFlash message: how many records of it, and the TimeUS of its first and last (None: no time)."""
+        """A DataFlash message (a ULog topic instance): how many records of it, and the TimeUS (timestamp) of its
+        first and last (None: no time)."""
         self.records += count
         for t_us in (first_us, last_us):
             if t_us is None:
@@ -178,10 +206,17 @@ class LogInventory:
         span = self.span_s
         return count / span if span > 0 else None
 
+    @property
+    def time_field(self) -> str:
+        """The field every record's time is read from: what an instant message needs."""
+        return {"tlog": "time_usec", "dataflash": "TimeUS"}.get(self.kind, "timestamp")
+
     def describe(self) -> str:
-        """``220 MAVLink 1 and 20 MAVLink 2 frames over 39.0 s`` (a DataFlash log: its records), for errors."""
+        """``220 MAVLink 1 and 20 MAVLink 2 frames over 39.0 s`` (a DataFlash or ULog log: its records), for errors."""
         if self.kind == "tlog":
             return f"{self.frames_v1} MAVLink 1 and {self.frames_v2} MAVLink 2 frames over {self.span_s:.1f} s"
+        if self.kind == "ulog":
+            return f"{self.records} ULog data messages over {self.span_s:.1f} s"
         return f"{self.records} DataFlash records over {self.span_s:.1f} s"
 
     def as_dict(self) -> dict[str, Any]:
@@ -195,6 +230,7 @@ class LogInventory:
             "last_us": self.last_us,
             "span_s": round(self.span_s, 6),
             "sysids": {str(s): n for s, n in self.sysids().items()},
+            **({"dropouts": self.dropouts} if self.kind == "ulog" else {}),
             "messages": [
                 {
                     "name": m.name,
@@ -218,6 +254,12 @@ class LogInventory:
                 f"{self.frames_v1 + self.frames_v2} frames (MAVLink 1: {self.frames_v1}, MAVLink 2: {self.frames_v2})"
             )
             out = [f"{self.records} records over {self.span_s:.1f} s, {what}"]
+        elif self.kind == "ulog":
+            topics = {str(key).partition("[")[0] for _s, key in self._counts}
+            out = [
+                f"{self.records} ULog data messages over {self.span_s:.1f} s of timestamp, {len(topics)} topics in "
+                f"{len(self._counts)} instances, {self.dropouts} dropouts"
+            ]
         else:
             out = [f"{self.records} DataFlash records over {self.span_s:.1f} s of TimeUS, {len(self._counts)} messages"]
         ids = self.sysids()
@@ -227,7 +269,7 @@ class LogInventory:
         if msgs:
             shown = ", ".join(self._with_rate(m) for m in msgs[:_LIST_MESSAGES])
             more = f" (+{len(msgs) - _LIST_MESSAGES} more)" if len(msgs) > _LIST_MESSAGES else ""
-            out.append(f"messages {shown}{more}")
+            out.append(f"{'topics' if self.kind == 'ulog' else 'messages'} {shown}{more}")
         return out
 
     def providers(self, kinds: Iterable[str], sysid: int | None = None) -> list[str]:
@@ -287,10 +329,7 @@ def explain_missing(inventory: LogInventory, smap, names: Sequence[str], sysid: 
     hints = inventory.providers(kinds, sysid) if kinds else []
     if instant_absent or any(smap.measured[n].message == smap.instant for n in absent):
         candidates = inventory.instant_candidates(sysid)
-        hints.append(
-            f"the instant ({'TimeUS' if inventory.kind != 'tlog' else 'time_usec'}): "
-            + (", ".join(candidates[:8]) or "none")
-        )
+        hints.append(f"the instant ({inventory.time_field}): " + (", ".join(candidates[:8]) or "none"))
     if hints:
         line += "; what the log has instead: " + "; ".join(hints)
     ids = inventory.sysids()

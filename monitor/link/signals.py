@@ -32,8 +32,10 @@ or fall outside it is rejected (counted) before the estimator. A value in plant 
 instant, ATTITUDE matches by ``time_boot_ms``, ACTUATOR_OUTPUT_STATUS by ``time_usec``). A message without
 one (VFR_HUD) cannot be matched: its signals are *latest values* (sample and hold): a sample takes the
 newest value received from its vehicle before the sample is processed, if that value is at most ``hold``
-seconds of the vehicle's clock older than the sample (default 1 s; see monitor/link/assembly.py). The
-instant and the actuator report need a time field. Anything unknown (a message, a field, an index, a key)
+seconds of the vehicle's clock older than the sample (default 1 s; see monitor/link/assembly.py). ``hold``
+on a message WITH a time field makes it a latest value too, stamped by its own time: how a slower stream
+joins faster samples (a 10 Hz position in 50 Hz samples, ``hold = 0.15``). The instant and the actuator
+report need a time field and no hold. Anything unknown (a message, a field, an index, a key)
 is a one-line error naming it.
 
 Why names and not just a list of fields: the recording and the replay report read signals by name
@@ -272,7 +274,7 @@ def _field_ref(text: Any, where: str, layouts: Layouts) -> tuple[MessageLayout, 
         raise UserError(f"{where}: {layouts.unknown(message)}")
     field, index = rest, 0
     if rest.endswith("]") and "[" in rest:
-        field, _, idx = rest[:-1].partition("[")
+        field, _, idx = rest[:-1].rpartition("[")
         if not idx.isdigit():
             raise UserError(f"{where}: bad index in '{text}'")
         index = int(idx)
@@ -338,13 +340,10 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int, layouts: Lay
         stamp = layout.time_field()
         hold = spec.get("hold")
         if stamp is not None:
-            if hold is not None:
-                raise UserError(
-                    f"{w}: 'hold' is for a message without a time field; {layout.name} is matched by its {stamp[0]}"
-                )
             time_fields[layout.name] = (layout.position(stamp[0]), stamp[1], layout.wrap(stamp[0]))
-        else:  # no time field (VFR_HUD): a latest value, sample and hold
-            hold = DEFAULT_HOLD_S if hold is None else hold
+        elif hold is None:  # no time field (VFR_HUD): a latest value, sample and hold
+            hold = DEFAULT_HOLD_S
+        if hold is not None:  # a latest value: stamped by its own time field if it has one (a slower topic)
             if isinstance(hold, bool) or not isinstance(hold, (int, float)) or not (math.isfinite(hold) and hold > 0):
                 raise UserError(f"{w}: 'hold' must be a positive number of seconds")
             hold = float(hold)
@@ -388,9 +387,13 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int, layouts: Lay
         raise UserError(f"{where}: 'actuator' names {len(act)} signal(s) but the plant has {inputs} input(s)")
     for name in act:
         if not measured[name].timed:
+            why = (
+                "'hold' makes it a latest value"
+                if name in time_fields or measured[name].message in time_fields
+                else f"{measured[name].message} has no time_usec or time_boot_ms"
+            )
             raise UserError(
-                f"{where}: actuator '{name}': {measured[name].message} has no time_usec or time_boot_ms, "
-                "and the actuator report must be matched to its instant"
+                f"{where}: actuator '{name}': {why}, and the actuator report must be matched to its instant"
             )
     op = _operating_point(raw.get("operating_point"), where, measured, outs, act)
     condition = _condition(raw.get("condition"), where, measured, (*outs, *act))

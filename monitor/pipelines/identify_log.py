@@ -281,11 +281,11 @@ def _vehicle(req: IdentifyRequest, flight: FlightLog, smap, states: tuple[str, .
 def identify_log(req: IdentifyRequest, say: Callable[[str], None] = lambda _text: None) -> IdentifiedLog:
     """Read ``req.log`` (a tlog, or a DataFlash log: ``.bin``/``.log``), identify the model, write ``req.out``
     (loadable as it is); UserError names what is wrong."""
-    from monitor.link.dataflash import dataflash_kind, open_dataflash
+    from monitor.link.onboard_log import open_onboard_log
 
     _checked(req)
 
-    dlog = open_dataflash(req.log) if dataflash_kind(req.log) else None  # an on-board DataFlash log
+    dlog = open_onboard_log(req.log)  # an on-board log (DataFlash or ULog), None for a tlog
     try:
         return _identify(req, say, dlog)
     finally:
