@@ -8,6 +8,7 @@ assembled sample's values against the topic's own arrays at the instant's timest
 from __future__ import annotations
 
 import json
+import math
 import re
 import subprocess
 import sys
@@ -198,3 +199,51 @@ def test_ulog_mistakes_are_one_line_exit_2(tmp_path: Path, capsys, argv, message
     err = capsys.readouterr().err.strip().splitlines()
     errors = [line for line in err if "error" in line]
     assert code == 2 and len(errors) == 1 and message in errors[0], err
+
+
+DERIVED_MAP = """
+[signals]
+instant = "vehicle_local_position"
+outputs = ["alpha"]
+actuator = ["pitch_control"]
+[signals.measured]
+pitch_control = { field = "actuator_controls_0.control[1]" }
+[signals.measured.alpha]
+derive = "angle_of_attack"
+velocity_ned = ["vehicle_local_position.vx", "vehicle_local_position.vy", "vehicle_local_position.vz"]
+attitude_quaternion = [
+    { field = "vehicle_attitude.q[0]", hold = 0.1 }, { field = "vehicle_attitude.q[1]", hold = 0.1 },
+    { field = "vehicle_attitude.q[2]", hold = 0.1 }, { field = "vehicle_attitude.q[3]", hold = 0.1 },
+]
+"""
+
+
+def test_a_derived_angle_of_attack_from_a_real_log_is_scipy_s_rotation_of_its_arrays() -> None:
+    """A multicopter's α is of no use, but it is computed all the same: from the 10 Hz NED velocity and the
+    30 Hz attitude held (the newest record when the sample completes: the one at or before the instant, or the
+    next when the actuator's record comes after the instant's), equal to the velocity rotated into body axes by
+    scipy's Rotation from pyulog's own arrays."""
+    from pyulog import ULog
+    from scipy.spatial.transform import Rotation
+
+    log = open_onboard_log(APPENDED)
+    smap = _map(DERIVED_MAP, log)
+    h = log_spacing(str(APPENDED), smap.instant, None, dataflash=log)
+    assert h is not None
+    flight = read_flight(str(APPENDED), smap, h, dataflash=log)
+    rows = flight.samples[1]
+    ulog = ULog(str(APPENDED))
+    pos = ulog.get_dataset("vehicle_local_position").data
+    att = ulog.get_dataset("vehicle_attitude").data
+    assert len(rows) == len(pos["timestamp"]) == 95
+    quats = np.column_stack([att[f"q[{i}]"] for i in (1, 2, 3, 0)])  # scipy: x, y, z, w
+    for (_k, values), i in zip(rows, range(len(rows)), strict=True):
+        t = int(pos["timestamp"][i])
+        v_ned = [float(pos[c][i]) for c in ("vx", "vy", "vz")]
+        j = int(np.searchsorted(att["timestamp"], t, side="right")) - 1
+        candidates = []
+        for jj in (j, j + 1):
+            if 0 <= jj < len(quats):
+                u, _v, w = Rotation.from_quat(quats[jj]).inv().apply(v_ned)
+                candidates.append(math.degrees(math.atan2(w, u)))
+        assert min(abs(values["alpha"] - c) for c in candidates) < 1e-4, (values["alpha"], candidates)

@@ -135,7 +135,7 @@ class SampleAssembler:
         self._parts: dict[str, tuple[int, int, int, tuple[tuple[str, int, float, float], ...]]] = {}
         # messages without a time field: message -> ((name, position, scale, offset, hold in us), ...)
         self._held_parts: dict[str, tuple[tuple[str, int, float, float, float], ...]] = {}
-        for name, sig in signals.measured.items():
+        for name, sig in signals.raw.items():  # a derived signal's inputs are joined like any other signal
             if sig.hold is not None:  # not timed: a latest value
                 entry = (name, sig.position, sig.scale, sig.offset, sig.hold * 1e6)
                 self._held_parts[sig.message] = self._held_parts.get(sig.message, ()) + (entry,)
@@ -146,12 +146,12 @@ class SampleAssembler:
         if signals.instant not in self._parts:
             self._parts[signals.instant] = (*_time_field(signals, signals.instant), ())
         extra = [n for n in needs if n not in signals.outputs]
-        self.needed_messages = tuple(dict.fromkeys(signals.measured[n].message for n in extra))
+        self.needed_messages = tuple(dict.fromkeys(m for n in extra for m in signals.messages_of(n)))
         wanted = (*signals.messages(observe), *self.needed_messages)
         self.required = frozenset(m for m in wanted if m in self._parts)  # the timed ones
         self._hold_us = {e[0]: e[4] for entries in self._held_parts.values() for e in entries}
-        # the latest values the estimator (and the scheduler) need
-        self._held_outputs = tuple(n for n in (*signals.outputs, *extra) if n in self._hold_us)
+        # the latest values the estimator (and the scheduler) need (a derived output: its held inputs)
+        self._held_outputs = tuple(n for n in signals.read_from((*signals.outputs, *extra)) if n in self._hold_us)
         self._held: dict[str, tuple[float, int | None]] = {}  # name -> (latest value, its stamp in us)
         self._latest_us: int | None = None  # the newest instant of any timed part accepted
         self._pending: dict[int, _Slot] = {}
@@ -186,7 +186,7 @@ class SampleAssembler:
         if t_us is None:
             return ()
         names = [n for n in self._held_outputs if self._fresh(n, t_us) is None]
-        return tuple(dict.fromkeys(self.signals.measured[n].message for n in names))
+        return tuple(dict.fromkeys(self.signals.raw[n].message for n in names))
 
     def _add_held(self, message: str, values: tuple, now: float) -> list[AssembledSample]:
         """A message without a time field: its values become the vehicle's latest; a pending sample that only
@@ -370,6 +370,8 @@ class SampleAssembler:
                     value = self._fresh(name, time_usec)
                     if value is not None:
                         values[name] = value
+            if self.signals.derived:
+                self.signals.complete_derived(values)
             out.append(AssembledSample(kk, time_usec, values, slot.route, now))
         if out:
             self.counters.samples += len(out)

@@ -153,7 +153,7 @@ def _quiet_fds(sink: io.StringIO):
 def wanted_fields(smap: SignalMap, layouts: DataFlashLayouts) -> dict[str, set[str]]:
     """Message -> the columns a signal map reads from it (its time field included)."""
     out: dict[str, set[str]] = {}
-    for name, field in [(smap.instant, None), *((s.message, s.field) for s in smap.measured.values())]:
+    for name, field in [(smap.instant, None), *((s.message, s.field) for s in smap.raw.values())]:
         layout = layouts(name)
         stamp = layout.time_field() if layout is not None else None
         cols = out.setdefault(name, set())

@@ -121,7 +121,7 @@ def read_flight(
     from monitor.link.tlog import TlogStats, read_tlog
 
     wanted = {}
-    for name in {smap.instant, *(s.message for s in smap.measured.values())}:
+    for name in {smap.instant, *(s.message for s in smap.raw.values())}:
         layout = layout_by_name(name)
         if layout is not None:  # a MAVLink map (parse_signals checked its names): always found
             wanted[layout.msgid] = (layout.name, layout)

@@ -296,7 +296,10 @@ class LogInventory:
 
 
 def field_ref(signal) -> str:
-    """``MESSAGE.field`` or ``MESSAGE.field[index]`` (an array field), as a signal map writes it."""
+    """``MESSAGE.field`` or ``MESSAGE.field[index]`` (an array field), as a signal map writes it; a derived signal:
+    ``angle_of_attack(velocity_ned, attitude_quaternion)``."""
+    if signal.derivation is not None:
+        return signal.derivation.describe()
     layout = layout_by_name(signal.message)
     array = signal.index or (layout is not None and layout.lengths.get(signal.field, 1) > 1)
     return f"{signal.message}.{signal.field}" + (f"[{signal.index}]" if array else "")
@@ -314,20 +317,21 @@ def explain_missing(inventory: LogInventory, smap, names: Sequence[str], sysid: 
     """Which signals of ``names`` (and the instant) the log has no message for, and which of its messages could
     carry them, in one line; None when every message the signal map reads is in the log (for ``sysid``)."""
     present = inventory.names(sysid)
-    absent = [n for n in names if smap.measured[n].message not in present]
-    instant_absent = smap.instant not in present and not any(smap.measured[n].message == smap.instant for n in absent)
+    absent = [n for n in names if any(m not in present for m in smap.messages_of(n))]
+    instant_absent = smap.instant not in present and not any(smap.instant in smap.messages_of(n) for n in absent)
     if not absent and not instant_absent:
         return None
     parts = []
     if instant_absent:
         parts.append(f"the instant ({smap.instant})")
     parts += [f"{n} ({field_ref(smap.measured[n])})" for n in absent]
-    messages = sorted({smap.measured[n].message for n in absent} | ({smap.instant} if instant_absent else set()))
+    lacking = {m for n in absent for m in smap.messages_of(n) if m not in present}
+    messages = sorted(lacking | ({smap.instant} if instant_absent else set()))
     where = f" from sysid {sysid}" if sysid is not None and inventory.kind == "tlog" else ""
     line = f"missing signals: {', '.join(parts)}: the log has no {' or '.join(messages)}{where}"
     kinds = [k for n in absent for k in _kinds_of(n, smap.measured[n].message)]
     hints = inventory.providers(kinds, sysid) if kinds else []
-    if instant_absent or any(smap.measured[n].message == smap.instant for n in absent):
+    if instant_absent or any(smap.instant in smap.messages_of(n) for n in absent):
         candidates = inventory.instant_candidates(sysid)
         hints.append(f"the instant ({inventory.time_field}): " + (", ".join(candidates[:8]) or "none"))
     if hints:
@@ -344,7 +348,7 @@ def why_no_samples(inventory: LogInventory, smap, names: Sequence[str], sysid: i
     missing = explain_missing(inventory, smap, names, sysid)
     if missing is not None:
         return missing
-    messages = ", ".join(dict.fromkeys([smap.instant, *(smap.measured[n].message for n in names)]))
+    messages = ", ".join(dict.fromkeys([smap.instant, *(m for n in names for m in smap.messages_of(n))]))
     return (
         f"every message the signal map reads is in the log ({messages}), but they never made one sample at "
         f"h = {h:g} s: their time stamps must fall within h/2 of the instant message's (the log's own "

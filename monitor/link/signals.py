@@ -49,10 +49,12 @@ import math
 import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass
+from dataclasses import field as dc_field
 from pathlib import Path
 from typing import Any
 
 from monitor.errors import UserError
+from monitor.link.derived import Derivation, parse_derivation
 from monitor.link.dialect import MessageLayout, layout_by_name
 from monitor.wire.mavlink import ELEVATOR_FULL_SCALE_DEG, PITCH_CHANNEL
 from monitor.wire.telemetry import INSTANT_MESSAGE, field_of
@@ -146,6 +148,7 @@ DEFAULT_SIGNALS_TOML = contract_signals_toml(["alpha", "q", "elevator"], outputs
 
 _TOP_KEYS = {"instant", "outputs", "actuator", "record", "measured", "command", "operating_point", "condition"}
 _SIGNAL_KEYS = {"field", "scale", "offset", "unit", "range", "hold"}
+_INPUT_KEYS = {"field", "scale", "offset", "hold"}  # an input of a derived signal
 DEFAULT_HOLD_S = 1.0  # a latest-value signal (no time field) older than this, in the vehicle's seconds, is not used
 _COMMAND_KEYS = {"message", "channels", "full_scale", "group"}
 _COMMAND_MESSAGES = {"SET_ACTUATOR_CONTROL_TARGET": ("controls", 8)}
@@ -165,6 +168,7 @@ class Signal:
     offset: float = 0.0
     range: tuple[float, float] | None = None  # the physical envelope, plant units (None: any finite value)
     hold: float | None = None  # None: matched by its message's time field; else a latest value, usable this long (s)
+    derivation: Derivation | None = None  # a derived signal (monitor.link.derived): computed from its inputs
 
     @property
     def timed(self) -> bool:
@@ -198,6 +202,8 @@ class SignalMap:
     # the other measured signals where the model was identified (bank, yaw rate): the flight condition that an
     # envelope can be scheduled on besides the operating point (None: not stated)
     condition: dict[str, float] | None = None
+    # the derived signals' inputs (``alpha.velocity_ned[0]``), read from messages like the measured signals
+    inputs: dict[str, Signal] = dc_field(default_factory=dict)
 
     def __post_init__(self) -> None:
         op = self.operating_point or {}
@@ -205,6 +211,36 @@ class SignalMap:
             object.__setattr__(self, "y0", tuple(float(op.get(n, 0.0)) for n in self.outputs))
         if len(self.u0) != len(self.actuator):
             object.__setattr__(self, "u0", tuple(float(op.get(n, 0.0)) for n in self.actuator))
+        raw = {n: s for n, s in self.measured.items() if s.derivation is None}
+        object.__setattr__(self, "raw", {**raw, **self.inputs})
+        derived = tuple((n, s.derivation) for n, s in self.measured.items() if s.derivation is not None)
+        object.__setattr__(self, "derived", derived)
+
+    # every signal read from a message (the measured ones and the derived signals' inputs), by name: what the
+    # assembler joins; and the derived signals, computed from those once a sample is complete
+    raw: dict[str, Signal] = dc_field(init=False, repr=False, compare=False)
+    derived: tuple[tuple[str, Derivation], ...] = dc_field(init=False, repr=False, compare=False)
+
+    def read_from(self, names) -> tuple[str, ...]:
+        """The signals read from messages that ``names`` need: themselves, or a derived signal's inputs."""
+        out: list[str] = []
+        for name in names:
+            d = self.measured[name].derivation
+            out.extend(d.inputs if d is not None else (name,))
+        return tuple(dict.fromkeys(out))
+
+    def messages_of(self, name: str) -> tuple[str, ...]:
+        """The messages a measured signal is read from (a derived signal: its inputs')."""
+        return tuple(dict.fromkeys(self.raw[n].message for n in self.read_from((name,))))
+
+    def complete_derived(self, values: dict[str, float]) -> None:
+        """A complete sample's derived signals computed from its inputs (those present), the inputs dropped."""
+        for name, derivation in self.derived:
+            inputs = derivation.inputs
+            if all(n in values for n in inputs):
+                values[name] = derivation.compute(values)
+            for n in inputs:
+                values.pop(n, None)
 
     def deviations(
         self, values: dict[str, float], y0: Sequence[float] | None = None, u0: Sequence[float] | None = None
@@ -232,9 +268,9 @@ class SignalMap:
 
     def messages(self, observe: bool) -> tuple[str, ...]:
         """Every message whose parts make one sample (the instant first): what the estimator cannot do without."""
-        names = [self.instant] + [self.measured[s].message for s in self.outputs]  # incl. latest-value messages
+        names = [self.instant] + [m for s in self.outputs for m in self.messages_of(s)]  # incl. latest values
         if observe:
-            names += [self.measured[s].message for s in self.actuator]
+            names += [m for s in self.actuator for m in self.messages_of(s)]
         return tuple(dict.fromkeys(names))
 
     def reject_reason(self, values: dict[str, float]) -> str | None:
@@ -254,14 +290,15 @@ class SignalMap:
         return None
 
     def actuator_messages(self) -> tuple[str, ...]:
-        return tuple(dict.fromkeys(self.measured[s].message for s in self.actuator))
+        return tuple(dict.fromkeys(m for s in self.actuator for m in self.messages_of(s)))
 
     def describe(self) -> str:
-        outs = ", ".join(
-            f"y{i}={self.measured[s].message}.{self.measured[s].field}"
-            + ("" if self.measured[s].timed else " (latest value)")
-            for i, s in enumerate(self.outputs)
-        )
+        def where(sig: Signal) -> str:
+            if sig.derivation is not None:
+                return sig.derivation.describe()
+            return f"{sig.message}.{sig.field}" + ("" if sig.timed else " (latest value)")
+
+        outs = ", ".join(f"y{i}={where(self.measured[s])}" for i, s in enumerate(self.outputs))
         return f"instant {self.instant}; {outs}"
 
 
@@ -283,6 +320,57 @@ def _field_ref(text: Any, where: str, layouts: Layouts) -> tuple[MessageLayout, 
     except ValueError as exc:
         raise UserError(f"{where}: {exc}") from None
     return layout, field, index
+
+
+def _range(bounds: Any, w: str) -> tuple[float, float] | None:
+    if bounds is None:
+        return None
+    if (
+        not isinstance(bounds, list)
+        or len(bounds) != 2
+        or not all(isinstance(b, (int, float)) and not isinstance(b, bool) and math.isfinite(b) for b in bounds)
+        or not bounds[0] < bounds[1]
+    ):
+        raise UserError(f"{w}: 'range' must be [low, high] with finite low < high")
+    return (float(bounds[0]), float(bounds[1]))
+
+
+def _read_signal(
+    name: str, spec: Any, w: str, layouts: Layouts, time_fields: dict[str, tuple[int, int, int]]
+) -> Signal:
+    """One value read from one field: ``scale * MESSAGE.field[index] + offset`` (its message's time field noted in
+    ``time_fields``); ``spec`` a field reference or a table of field, scale, offset, unit, range, hold."""
+    if not isinstance(spec, dict):
+        spec = {"field": spec}
+    layout, field, index = _field_ref(spec.get("field"), w, layouts)
+    scale = spec.get("scale", 1.0)
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale == 0:
+        raise UserError(f"{w}: 'scale' must be a finite non-zero number")
+    offset = spec.get("offset", 0.0)
+    if isinstance(offset, bool) or not isinstance(offset, (int, float)) or not math.isfinite(offset):
+        raise UserError(f"{w}: 'offset' must be a finite number")
+    stamp = layout.time_field()
+    hold = spec.get("hold")
+    if stamp is not None:
+        time_fields[layout.name] = (layout.position(stamp[0]), stamp[1], layout.wrap(stamp[0]))
+    elif hold is None:  # no time field (VFR_HUD): a latest value, sample and hold
+        hold = DEFAULT_HOLD_S
+    if hold is not None:  # a latest value: stamped by its own time field if it has one (a slower topic)
+        if isinstance(hold, bool) or not isinstance(hold, (int, float)) or not (math.isfinite(hold) and hold > 0):
+            raise UserError(f"{w}: 'hold' must be a positive number of seconds")
+        hold = float(hold)
+    return Signal(
+        name,
+        layout.name,
+        field,
+        index,
+        layout.position(field, index),
+        float(scale),
+        str(spec.get("unit", "")),
+        float(offset),
+        _range(spec.get("range"), w),
+        hold,
+    )
 
 
 def _names(
@@ -323,52 +411,46 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int, layouts: Lay
     table = raw.get("measured")
     if not isinstance(table, dict) or not table:
         raise UserError(f"{where}: needs a [signals.measured] table of name = {{ field = ... }}")
+    hidden_inputs: dict[str, Signal] = {}
+
+    def read_input(hidden: str, spec: Any, w: str) -> None:
+        """A derived signal's input: a field reference or a table of field, scale, offset, hold."""
+        if hidden in table:
+            raise UserError(f"{w}: the name '{hidden}' is taken by the derivation's input: rename the signal")
+        bad = sorted(set(spec) - _INPUT_KEYS) if isinstance(spec, dict) else []
+        if bad:
+            raise UserError(f"{w}: unknown key '{bad[0]}' (an input takes: field, scale, offset, hold)")
+        hidden_inputs[hidden] = _read_signal(hidden, spec, w, layouts, time_fields)
+
     for name, spec in table.items():
         w = f"{where} measured.{name}"
-        if not isinstance(spec, dict):
-            spec = {"field": spec}
-        bad = sorted(set(spec) - _SIGNAL_KEYS)
-        if bad:
-            raise UserError(f"{w}: unknown key '{bad[0]}' (known: field, scale, offset, unit, range, hold)")
-        layout, field, index = _field_ref(spec.get("field"), w, layouts)
-        scale = spec.get("scale", 1.0)
-        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale == 0:
-            raise UserError(f"{w}: 'scale' must be a finite non-zero number")
-        offset = spec.get("offset", 0.0)
-        if isinstance(offset, bool) or not isinstance(offset, (int, float)) or not math.isfinite(offset):
-            raise UserError(f"{w}: 'offset' must be a finite number")
-        stamp = layout.time_field()
-        hold = spec.get("hold")
-        if stamp is not None:
-            time_fields[layout.name] = (layout.position(stamp[0]), stamp[1], layout.wrap(stamp[0]))
-        elif hold is None:  # no time field (VFR_HUD): a latest value, sample and hold
-            hold = DEFAULT_HOLD_S
-        if hold is not None:  # a latest value: stamped by its own time field if it has one (a slower topic)
-            if isinstance(hold, bool) or not isinstance(hold, (int, float)) or not (math.isfinite(hold) and hold > 0):
-                raise UserError(f"{w}: 'hold' must be a positive number of seconds")
-            hold = float(hold)
-        bounds = spec.get("range")
-        if bounds is not None:
-            if (
-                not isinstance(bounds, list)
-                or len(bounds) != 2
-                or not all(isinstance(b, (int, float)) and not isinstance(b, bool) and math.isfinite(b) for b in bounds)
-                or not bounds[0] < bounds[1]
-            ):
-                raise UserError(f"{w}: 'range' must be [low, high] with finite low < high")
-            bounds = (float(bounds[0]), float(bounds[1]))
-        measured[name] = Signal(
-            name,
-            layout.name,
-            field,
-            index,
-            layout.position(field, index),
-            float(scale),
-            str(spec.get("unit", "")),
-            float(offset),
-            bounds,
-            hold,
-        )
+        if isinstance(spec, dict) and "derive" in spec:
+            try:
+                derivation, unit = parse_derivation(name, spec, w, read_input)
+            except ValueError as exc:
+                raise UserError(str(exc)) from None
+            first = hidden_inputs[derivation.inputs[0]]
+            timed = all(hidden_inputs[n].timed for n in derivation.inputs)
+            holds = [hidden_inputs[n].hold for n in derivation.inputs if hidden_inputs[n].hold is not None]
+            measured[name] = Signal(
+                name,
+                first.message,
+                derivation.kind,
+                0,
+                -1,
+                1.0,
+                unit,
+                0.0,
+                _range(spec.get("range"), w),
+                None if timed else min(h for h in holds if h is not None),
+                derivation,
+            )
+            continue
+        if isinstance(spec, dict):
+            bad = sorted(set(spec) - _SIGNAL_KEYS)
+            if bad:
+                raise UserError(f"{w}: unknown key '{bad[0]}' (known: field, scale, offset, unit, range, hold, derive)")
+        measured[name] = _read_signal(name, spec, w, layouts, time_fields)
     instant = raw.get("instant")
     instant_layout = layouts(instant) if isinstance(instant, str) else None
     if instant_layout is None:
@@ -428,6 +510,7 @@ def parse_signals(raw: Any, source: str, outputs: int, inputs: int, layouts: Lay
         source,
         op,
         condition=condition,
+        inputs=hidden_inputs,
     )
 
 

@@ -156,11 +156,15 @@ class ULogLog:
 
     def records(self, wanted: dict[str, set[str]]) -> Iterator[tuple[str, tuple, int]]:
         """``(topic, values, t_us)`` of every record of the ``wanted`` topics in time order (stable: a topic's
-        own order kept); ``values`` in the topic's field order, the wanted fields filled, the others 0."""
+        own order kept); ``values`` in the topic's field order, the wanted fields filled, the others 0.
+
+        Records of several topics stamped alike come in the reverse order of ``wanted``, whose first topic is the
+        instant (``wanted_fields``): a sample then sees every record stamped at its instant (pyulog keeps each
+        topic's records apart, so the file's own interleaving of equal stamps is not known)."""
         import numpy as np
 
         plans = []
-        for name, cols in wanted.items():
+        for name, cols in reversed(wanted.items()):
             layout = self.layouts(name)
             if layout is None or layout.name not in self.datasets:
                 continue

@@ -86,7 +86,7 @@ class Pipeline:
         self._wanted: dict[int, tuple[str, MessageLayout]] = {}
         self.scheduled = any(m.envelope is not None for m in table.fleet.models())
         for model in table.fleet.models():
-            for name in {model.signals.instant, *(s.message for s in model.signals.measured.values())}:
+            for name in {model.signals.instant, *(s.message for s in model.signals.raw.values())}:
                 layout = layout_by_name(name)
                 if layout is not None:  # a DataFlash map names the log's messages (fed by on_message)
                     self._wanted[layout.msgid] = (layout.name, layout)
