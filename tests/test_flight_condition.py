@@ -52,11 +52,20 @@ def test_trims_interpolate_barycentrically_in_two_variables_exactly_for_a_linear
         if s.triangulation.find_simplex(x / s.scale) >= 0:
             inside += 1
             assert w @ trim == pytest.approx(float(x @ np.array([0.3, -2.0]) + 1.0), abs=1e-9)
-        else:  # beyond the points' hull: the nearest point alone, no extrapolation
-            assert sorted(w) == pytest.approx([0, 0, 0, 0, 1])
+        else:  # beyond the points' hull: between two of its corners (the hull's closest point), no extrapolation
+            edge = sorted(np.flatnonzero(w > 1e-12).tolist())
+            assert len(edge) == 1 or edge in [sorted(e) for e in hull_edges(s)]
     assert inside > 50
+    # continuous across the hull: a walk from inside to outside moves the interpolated trim by small steps only
+    walk = np.column_stack([np.full(400, 51.5), np.linspace(1.0, 2.0, 400)])
+    trims = [trim_weights(s, x) @ trim for x in walk]
+    assert max(abs(np.diff(trims))) < 5 * abs(trims[-1] - trims[0]) / 400
     for i, point in enumerate(at):  # a point's own place: that point alone
         assert trim_weights(s, point)[i] == pytest.approx(1.0)
+
+
+def hull_edges(schedule) -> list[list[int]]:
+    return [[int(a), int(b)] for a, b in schedule.triangulation.convex_hull]
 
 
 def test_points_a_few_tenths_apart_are_one_level_of_the_identified_range() -> None:

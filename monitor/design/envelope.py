@@ -25,8 +25,8 @@ The chain:
 What the common P proves: with ``V(xi) = xi' P xi`` decreasing along every point's loop at every delay vertex,
 and the loops affine in ``B0(tau)``, any switching among the points at any rate, with any delay sequence in the
 interval, keeps the loop stable, and ``||e_f||_2 <= gamma ||w||_2`` from rest. What it does not cover: the
-jumps of the operating point's offsets (and of the fault's steady state ``S_x f``, which differs per point)
-when the point changes, which act as a disturbance on the state at each switch; and interpolated gains (a loop
+motion of the trim interpolated between the points, and the jump of the fault's steady state ``S_x f`` (which
+differs per point) when the point changes, which act as offsets on the state; and interpolated gains (a loop
 with gains interpolated between points is not a convex combination of the points' loops): switching is
 covered, interpolation is not.
 """
@@ -75,9 +75,9 @@ STATEMENT = (
     "among the points at any rate, with any delay sequence in the interval"
 )
 NOT_COVERED = (
-    "not covered: the jumps of the operating point's offsets (and of the fault's steady state) when the point "
-    "changes, which enter as a disturbance at each switch; and gains interpolated between points (switching is "
-    "covered, interpolation is not)"
+    "not covered: the motion of the trim interpolated between the points as the flight moves, and the jump of "
+    "the fault's steady state when the point changes, which enter as offsets; and gains interpolated between "
+    "points (switching is covered, interpolation is not)"
 )
 
 T = TypeVar("T")

@@ -209,8 +209,13 @@ def trim_weights(schedule: Schedule, x: Sequence[float]) -> np.ndarray:
 
     Linear: on one variable (or points that all lie on a line in the scaled schedule) between the two points
     that bracket ``x`` along it; on two, barycentric in the Delaunay triangle of the scaled points that contains
-    ``x``. Outside the points' span (their hull) the nearest point alone (weight 1): no extrapolation of a trim.
-    A point's own place gives that point alone, so a single trim is what it was. Non-finite ``x``: the nearest
+    ``x``. Outside the points' span the trim of the span's closest point (an end point on one variable; on two,
+    the closest point of the hull, between the ends of its edge): no extrapolation of a trim, and no jump at the
+    hull either. Why that matters: the turn legs of an identification flight are flown at cruise speed, so the
+    hull's side there is nearly along the bank's load factor, and an aircraft a knot fast in a turn is outside it;
+    taking the nearest point there made the trim jump by half the difference of two points (on c172p, 3 deg/s of
+    pitch rate in a roll-out from 45 deg), which the estimator read as a fault. A point's own place gives that
+    point alone, so a single trim is what it was. Non-finite ``x``: the nearest
     point cannot be told either, and the first point's weight is 1 (the caller keeps its point then)."""
     xs = np.asarray(x, dtype=float)
     n = len(schedule.points)
@@ -238,8 +243,17 @@ def trim_weights(schedule: Schedule, x: Sequence[float]) -> np.ndarray:
         return w
     tri = schedule.triangulation
     simplex = int(tri.find_simplex(p))
-    if simplex < 0:
-        w[int(np.argmin(distances(schedule, [float(v) for v in xs])))] = 1.0
+    if simplex < 0:  # beyond the hull: the hull's closest point, between the two ends of its edge
+        best = (np.inf, 0, 0, 0.0)
+        for a, b in tri.convex_hull:
+            edge = scaled[b] - scaled[a]
+            t = float(np.clip((p - scaled[a]) @ edge / (edge @ edge), 0.0, 1.0))
+            gap = float(np.linalg.norm(p - scaled[a] - t * edge))
+            if gap < best[0]:
+                best = (gap, int(a), int(b), t)
+        _gap, a, b, t = best
+        w[a] += 1.0 - t
+        w[b] += t
         return w
     vertices = tri.simplices[simplex]
     T = tri.transform[simplex]

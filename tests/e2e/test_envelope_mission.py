@@ -73,8 +73,11 @@ def test_the_envelope_switches_to_the_slow_point_and_reads_the_slow_down_closer_
     switch = used.index("c172p-90kt")
     assert set(used[:switch]) == {"c172p-100kt"} and set(used[switch:]) == {"c172p-90kt"} and t[switch] > 40.0
     assert all(r.inside for r in scheduled)
-    # until the switch the same point and gains: the same estimate
-    assert np.allclose(f_env[:switch], f_one[:switch], rtol=0, atol=1e-9)
+    # before the slow-down the airspeed stays about 100 kt: the same point's gains, and a trim interpolated at most
+    # a few tenths of a knot towards the 90-kt point's, so nearly the same estimate
+    before = t < 40.0
+    print(f"max |f_env - f_one| before the slow-down: {np.abs(f_env - f_one)[before].max():.4f} deg")
+    assert np.abs(f_env - f_one)[before].max() < 0.1 * np.abs(f_one[before]).max()
     # settled at 90 kt (the mission's last 15 s) the slow point's trim reads the steady flight closer to no fault
     settled = t >= 60.0
     one_max, env_max = np.abs(f_one[settled]).max(), np.abs(f_env[settled]).max()
