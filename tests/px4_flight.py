@@ -68,7 +68,11 @@ def fly(
     altitude_ft: float = 4000.0,
     wind_ned_fps: tuple[float, float, float] = (0.0, 0.0, 0.0),
     turbulence: str | None = None,
+    bias_deg: float = 0.0,
+    fault_at_s: float | None = None,
 ) -> Px4Flight:
+    """``bias_deg`` from ``fault_at_s`` (s after the first sample): an elevator fault, the surface that much off
+    the deflection commanded (the logged control stays the command; ``elevator`` is the surface)."""
     fdm = trimmed_c172p(airspeed_kt, altitude_ft, dt=H / STEPS_PER_SAMPLE)
     total = fdm["fcs/elevator-cmd-norm"] + fdm["fcs/pitch-trim-cmd-norm"]
     trim_deg = fdm["fcs/elevator-pos-deg"]
@@ -95,7 +99,8 @@ def fly(
     with quiet():
         for k, d in enumerate(du):
             deflection = trim_deg + d
-            command = deflection / (THROW[1] if deflection >= 0 else -THROW[0])
+            command = _command(deflection)
+            faulty = fault_at_s is not None and k * H >= fault_at_s
             cols[k, :18] = (
                 g("aero/alpha-deg"),
                 g("aero/beta-deg"),
@@ -116,7 +121,7 @@ def fly(
                 g("atmosphere/total-wind-down-fps") * FT,
                 command,
             )
-            fdm["fcs/elevator-cmd-norm"] = command
+            fdm["fcs/elevator-cmd-norm"] = _command(deflection + bias_deg) if faulty else command
             fdm.run()
             cols[k, 18] = g("fcs/elevator-pos-deg")  # the surface over this sample (the FCS has no lag)
             for _ in range(STEPS_PER_SAMPLE - 1):
@@ -138,6 +143,11 @@ def fly(
         c[18],
         float(trim_deg),
     )
+
+
+def _command(deflection: float) -> float:
+    """The c172p's normalised elevator command for a deflection (deg), through its unequal throws."""
+    return deflection / (THROW[1] if deflection >= 0 else -THROW[0])
 
 
 def quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:

@@ -113,6 +113,10 @@ def test_alpha_beta_and_airspeed_derived_equal_jsbsim_s_own(windy) -> None:
             speed * math.cos(math.radians(a)) * math.cos(math.radians(b)) - f.u_aero[k],  # velocities/u-aero-fps
         )
     assert np.max(np.abs(err)) < 1e-6, np.max(np.abs(err), axis=0)
+    for i, angle in enumerate(("roll", "pitch", "yaw")):  # JSBSim's attitude/phi-rad, theta-rad, psi-rad
+        d = _derivation({"derive": angle, "attitude_quaternion": ["a"] * 4, "unit": "rad"})
+        got = [d.compute(_values(d, [quaternion(*f.euler[k])])) for k in range(len(f))]
+        assert np.allclose(np.unwrap(got), np.unwrap(f.euler[:, i]), atol=1e-9), angle
     assert np.ptp(f.alpha) > 2.0 and np.ptp(f.beta) > 5.0  # a flight that moves them
     no_wind = _derivation({"derive": "angle_of_attack", "velocity_ned": ["a"] * 3, "attitude_euler": ["a"] * 3})
     ground = [no_wind.compute(_values(no_wind, [f.v_ned[k], f.euler[k]])) for k in range(len(f))]

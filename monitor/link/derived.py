@@ -80,6 +80,9 @@ DERIVATIONS: dict[str, _Kind] = {
     "airspeed": _Kind(
         ("velocity_ned", "velocity_body", "wind_ned", "wind_ne"), (), "m/s", "the norm of the air-relative velocity"
     ),
+    "roll": _Kind(("attitude_quaternion",), (), "deg", "the ZYX Euler roll of the attitude quaternion"),
+    "pitch": _Kind(("attitude_quaternion",), (), "deg", "the ZYX Euler pitch of the attitude quaternion"),
+    "yaw": _Kind(("attitude_quaternion",), (), "deg", "the ZYX Euler yaw of the attitude quaternion"),
     "control": _Kind(("input",), ("throw",), "deg", "a normalised control in [-1, 1] times its throw"),
     "pwm": _Kind(("input",), ("pwm", "throw"), "deg", "a servo PWM about its trim, through its throws"),
     "degrees": _Kind(("input",), (), "deg", "radians to degrees"),
@@ -109,6 +112,8 @@ class Derivation:
         got = {role: [values[n] for n in names] for role, names in self.roles}
         if self.kind in ("control", "pwm", "degrees", "radians"):
             return self.to_unit * _scalar(self.kind, got["input"][0], self.params)
+        if self.kind in _EULER:
+            return self.to_unit * _euler(self.kind, got["attitude_quaternion"])
         u, v, w = _air_body(got)
         if self.kind == "airspeed":
             return math.sqrt(u * u + v * v + w * w)
@@ -116,6 +121,20 @@ class Derivation:
             return self.to_unit * math.atan2(w, u) if (u or w) else math.nan
         speed = math.sqrt(u * u + v * v + w * w)
         return self.to_unit * math.asin(max(-1.0, min(1.0, v / speed))) if speed > 0 else math.nan
+
+
+_EULER = ("roll", "pitch", "yaw")
+
+
+def _euler(kind: str, q: list[float]) -> float:
+    """A ZYX Euler angle (rad) of the quaternion [w, x, y, z] (body to NED), as PX4's Eulerf(Quatf) gives it."""
+    norm = math.sqrt(sum(c * c for c in q)) or 1.0
+    w, x, y, z = (c / norm for c in q)
+    if kind == "roll":
+        return math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    if kind == "pitch":
+        return math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
 
 
 def _scalar(kind: str, x: float, params: tuple[float, ...]) -> float:
@@ -224,8 +243,8 @@ def parse_derivation(
     bad = [k for k in spec if k not in known]
     if bad:
         raise ValueError(f"{w}: '{kind_name}' takes no key '{bad[0]}' (its keys: {', '.join(known)})")
-    if kind.roles == ("input",):
-        chosen = [_one_of(spec, ("input",), w, True)]
+    if len(kind.roles) == 1:
+        chosen = [_one_of(spec, kind.roles, w, True)]
     else:
         velocity = _one_of(spec, ("velocity_ned", "velocity_body"), w, True)
         attitude = _one_of(spec, ("attitude_quaternion", "attitude_euler"), w, False)
@@ -260,7 +279,7 @@ def parse_derivation(
     if not isinstance(unit, str):
         raise ValueError(f"{w}: 'unit' must be a string")
     to_unit = 1.0
-    if kind_name in ("angle_of_attack", "sideslip"):
+    if kind_name in ("angle_of_attack", "sideslip", *_EULER):
         if unit not in _ANGLE_UNITS:
             raise ValueError(f"{w}: an angle's 'unit' is deg or rad, got {unit!r}")
         to_unit = _ANGLE_UNITS[unit]
