@@ -32,3 +32,14 @@ def hand_made_gains_file(path: Path, plant_name: str = "paper-continuous") -> Pa
     )
     write_gains(path, result, plant)
     return path
+
+
+def paper_plant_sampled_at(path: Path, h: float) -> Path:
+    """The paper's continuous plant sampled at ``h`` (a log's own rate) with a delay bound inside one sample: a
+    plant of the right rate for a log whose signals are what a test checks, not the plant's."""
+    from importlib import resources
+
+    preset = resources.files("monitor.presets").joinpath("paper-continuous.toml").read_text("utf-8")
+    text = preset.replace("\nh = 1.0\n", f"\nh = {h!r}\n", 1).replace("tau_max = 0.4612", f"tau_max = {h / 2!r}")
+    path.write_text(text)
+    return path

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -253,23 +254,32 @@ def write_px4_ulog(path: Path, flight: Px4Flight, seed: int = 0) -> None:
             log.write(topic, values, multi_id)
 
 
-def write_mavlink_tlog(path: Path, flight: Px4Flight, sysid: int = 1) -> None:
-    """The flight as a MAVLink autopilot without an AoA vane streams it, one frame per record (MAVProxy's tlog):
+def mavlink_samples(flight: Px4Flight, sysid: int = 1) -> Iterator[tuple[int, list[bytes]]]:
+    """Per sample: its instant (us since boot) and the frames a MAVLink autopilot without an AoA vane sends:
     ATTITUDE (rad), LOCAL_POSITION_NED (m/s), WIND_COV (the wind, NED m/s) and ACTUATOR_OUTPUT_STATUS (the
     elevator's normalised command in actuator[1]), each stamped with the sample's instant."""
     from monitor.wire.mavlink import mavlink, new_codec
 
     codec = new_codec(sysid, 1)
+    for k in range(len(flight)):
+        t = int(flight.t_us[k])
+        msgs = [
+            mavlink.MAVLink_attitude_message(t // 1000, *map(float, flight.euler[k]), *map(float, flight.rates[k])),
+            mavlink.MAVLink_local_position_ned_message(t // 1000, 0.0, 0.0, 0.0, *map(float, flight.v_ned[k])),
+            mavlink.MAVLink_wind_cov_message(t, *map(float, flight.wind[k]), 0.0, 0.0, 0.0, 0.0, 0.0),
+            mavlink.MAVLink_actuator_output_status_message(t, 2, [0.0, float(flight.control[k])] + [0.0] * 30),
+        ]
+        frames = []
+        for msg in msgs:
+            codec.send(msg)
+            frames.append(codec.file.take())
+        yield t, frames
+
+
+def write_mavlink_tlog(path: Path, flight: Px4Flight, sysid: int = 1) -> None:
+    """``mavlink_samples`` as MAVProxy logs them: one frame per record, 0.5 ms apart."""
     stamp = struct.Struct(">Q")
     with open(path, "wb") as fh:
-        for k in range(len(flight)):
-            t = int(flight.t_us[k])
-            msgs = [
-                mavlink.MAVLink_attitude_message(t // 1000, *map(float, flight.euler[k]), *map(float, flight.rates[k])),
-                mavlink.MAVLink_local_position_ned_message(t // 1000, 0.0, 0.0, 0.0, *map(float, flight.v_ned[k])),
-                mavlink.MAVLink_wind_cov_message(t, *map(float, flight.wind[k]), 0.0, 0.0, 0.0, 0.0, 0.0),
-                mavlink.MAVLink_actuator_output_status_message(t, 2, [0.0, float(flight.control[k])] + [0.0] * 30),
-            ]
-            for i, msg in enumerate(msgs):
-                codec.send(msg)
-                fh.write(stamp.pack(1_700_000_000_000_000 + t + i * 500) + codec.file.take())
+        for t, frames in mavlink_samples(flight, sysid):
+            for i, frame in enumerate(frames):
+                fh.write(stamp.pack(1_700_000_000_000_000 + t + i * 500) + frame)

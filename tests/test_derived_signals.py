@@ -127,19 +127,15 @@ def test_derived_signals_through_the_live_pipeline_from_a_tlog(windy, tmp_path: 
     """The tlog is read by ``analyse_log``: the frame parser, the vehicle table and the assembler of
     ``run --observe``, with the map's derived α (Euler angles, NED velocity and wind) and elevator (a normalised
     control through its throws)."""
-    from importlib import resources
-
     from monitor.service.alarm import AlarmConfig
     from monitor.service.fleet_file import Fleet, load_model
     from monitor.service.offline import analyse_log
-    from tests.gains_files import hand_made_gains_file
+    from tests.gains_files import hand_made_gains_file, paper_plant_sampled_at
 
     f = windy
     write_mavlink_tlog(tmp_path / "flight.tlog", f)
     (tmp_path / "map.toml").write_text(MAVLINK_MAP)
-    plant = tmp_path / "plant-h002.toml"  # the paper's plant sampled at the log's 50 Hz
-    preset = resources.files("monitor.presets").joinpath("paper-continuous.toml").read_text("utf-8")
-    plant.write_text(preset.replace("\nh = 1.0\n", "\nh = 0.02\n", 1).replace("tau_max = 0.4612", "tau_max = 0.01"))
+    plant = paper_plant_sampled_at(tmp_path / "plant.toml", H)  # the paper's plant at the log's 50 Hz
     gains = hand_made_gains_file(tmp_path / "gains.toml", str(plant))
     fleet = Fleet(load_model(str(plant), gains, signals_file=tmp_path / "map.toml"))
     records = analyse_log(tmp_path / "flight.tlog", fleet, AlarmConfig()).records
@@ -236,3 +232,32 @@ def test_pwm_and_control_follow_their_stated_throws() -> None:
     at = {1100: -28.0, 1520: 0.0, 1900: 23.0, 1310: -14.0, 1710: 11.5}
     assert [pwm.compute({pwm.inputs[0]: x}) for x in at] == pytest.approx(list(at.values()))
     assert [control.compute({control.inputs[0]: x}) for x in (-1.0, 0.5)] == pytest.approx([-25.0, 12.5])
+
+
+def test_a_derived_pwm_reads_a_dataflash_log_as_scale_and_offset_do(tmp_path: Path) -> None:
+    """ArduPlane's RCOU.C2 (servo PWM) through ``pwm`` with symmetric throws is the map's scale and offset; q
+    through ``radians`` and back through ``degrees`` is q: derived signals read DataFlash logs as any other."""
+    from monitor.link.dataflash import open_dataflash
+    from monitor.link.flight_log import read_flight
+    from tests.test_dataflash import ARDUPLANE_MAP, short_period_flight, write_dataflash
+
+    _A, _B, samples = short_period_flight(seconds=5.0)
+    path = tmp_path / "00000001.BIN"
+    write_dataflash(path, samples, 0.02)
+    derived = ARDUPLANE_MAP.replace(
+        'elevator = { field = "RCOU.C2", scale = 0.06, offset = -90.0, unit = "deg" }',
+        'elevator = { derive = "pwm", input = "RCOU.C2", pwm = [1000, 1500, 2000], throw = 30.0 }\n'
+        'q_rad = { derive = "radians", input = "RATE.P" }',
+    )
+    assert derived != ARDUPLANE_MAP
+    rows = {}
+    for name, text in (("plain", ARDUPLANE_MAP), ("derived", derived)):
+        dlog = open_dataflash(path)
+        table = tomllib.loads(text)["signals"]
+        smap = parse_signals({**table, "outputs": ["alpha", "q"]}, name, 2, 1, dlog.layouts)
+        rows[name] = read_flight(str(path), smap, 0.02, dataflash=dlog).samples[1]
+        dlog.close()
+    assert len(rows["plain"]) == len(samples) == len(rows["derived"])
+    for (k1, plain), (k2, mine) in zip(rows["plain"], rows["derived"], strict=True):
+        assert k1 == k2 and mine["elevator"] == pytest.approx(plain["elevator"], abs=1e-9)
+        assert math.degrees(mine["q_rad"]) == pytest.approx(plain["q"], rel=1e-12)

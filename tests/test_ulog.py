@@ -247,3 +247,27 @@ def test_a_derived_angle_of_attack_from_a_real_log_is_scipy_s_rotation_of_its_ar
                 u, _v, w = Rotation.from_quat(quats[jj]).inv().apply(v_ned)
                 candidates.append(math.degrees(math.atan2(w, u)))
         assert min(abs(values["alpha"] - c) for c in candidates) < 1e-4, (values["alpha"], candidates)
+
+
+def test_a_damaged_ulog_gives_its_good_records_one_warning_and_clean_json(tmp_path: Path, capsys, caplog) -> None:
+    """2 kB overwritten in the middle (a torn write): pyulog resynchronises and says so on stdout, which would
+    corrupt --json; the monitor says it in one WARNING and reads the records around the damage."""
+    from tests.gains_files import hand_made_gains_file
+
+    data = bytearray(APPENDED.read_bytes())
+    middle = len(data) // 2
+    data[middle : middle + 2000] = bytes(range(256)) * 7 + bytes(208)
+    torn = tmp_path / "torn.ulg"
+    torn.write_bytes(bytes(data))
+    (tmp_path / "map.toml").write_text(DERIVED_MAP)
+    gains = hand_made_gains_file(tmp_path / "gains.toml")
+    argv = ["analyse", str(torn), "--plant", "paper-continuous", "--gains", str(gains), "--signals"]
+    with caplog.at_level("WARNING"):
+        code = main([*argv, str(tmp_path / "map.toml"), "--json"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    report = json.loads(captured.out)  # nothing of pyulog's on stdout
+    whole = open_onboard_log(APPENDED).inventory.records
+    assert 0.5 * whole < report["log"]["inventory"]["records"] < whole
+    warnings = [r for r in caplog.records if r.levelname == "WARNING" and "pyulog" in r.getMessage()]
+    assert len(warnings) == 1, [r.getMessage() for r in caplog.records]

@@ -22,6 +22,9 @@ pyulog reads the whole log into arrays (one pass); a 100 MB log takes seconds.
 
 from __future__ import annotations
 
+import contextlib
+import io
+import logging
 import re
 import struct
 from collections.abc import Iterator
@@ -32,6 +35,8 @@ from monitor.errors import UserError
 from monitor.link.dialect import MessageLayout
 from monitor.link.log_inventory import LogInventory
 from monitor.link.signals import Layouts
+
+_logger = logging.getLogger(__name__)
 
 __all__ = ["ULOG_MAGIC", "ULogLayouts", "ULogLog", "is_ulog", "open_ulog", "topic_name"]
 
@@ -140,7 +145,7 @@ class ULogLog:
     def __init__(self, path: str | Path, ulog: Any) -> None:
         self.path = str(path)
         self.ulog = ulog
-        self.datasets = {topic_name(d.name, d.multi_id): d for d in ulog.data_list if len(d.data["timestamp"])}
+        self.datasets = {topic_name(d.name, d.multi_id): d for d in ulog.data_list if len(d.data.get("timestamp", ()))}
         self.counts = {name: len(d.data["timestamp"]) for name, d in self.datasets.items()}
         self.layouts = ULogLayouts(self.datasets)
         self.inventory = self._inventory()
@@ -205,10 +210,17 @@ def open_ulog(path: str | Path) -> ULogLog:
         raise UserError(f"{path}: not a ULog log (a .ulg starts with the bytes 'ULog' 01 12 35)")
     from pyulog import ULog
 
+    complaints = io.StringIO()  # pyulog prints what it finds wrong on stdout, where it would corrupt --json
     try:
-        ulog = ULog(str(path))
+        with contextlib.redirect_stdout(complaints):
+            ulog = ULog(str(path))
     except Exception as exc:  # pyulog raises ULogException, struct.error, ValueError... on a damaged header
         raise UserError(f"{path}: cannot read the ULog log: {exc}") from None
+    lines = complaints.getvalue().strip().splitlines()
+    if lines or ulog.file_corruption:
+        more = f" (and {len(lines) - 1} more lines)" if len(lines) > 1 else ""
+        what = lines[0][:200] if lines else "file corruption detected"
+        _logger.warning("%s: pyulog: %s%s; the records around the damage are read", path, what, more)
     log = ULogLog(path, ulog)
     if not log.counts:
         raise UserError(f"{path}: the ULog log holds no data messages")
