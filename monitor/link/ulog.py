@@ -59,8 +59,8 @@ _CODES = {
     "char": "c",
 }
 _HINT = (
-    "a ULog log names PX4's topics: give a signal map of them with --signals FILE (a PX4 fixed-wing's is in "
-    "docs/tutorials/flight-logs.md, 'ULog logs (PX4)')"
+    "a ULog log names PX4's topics: give a signal map of them with --signals FILE (a PX4 fixed-wing's, alpha "
+    "derived from velocity and attitude, is in docs/tutorials/px4.md)"
 )
 
 
@@ -156,6 +156,9 @@ class ULogLog:
         for name, d in sorted(self.datasets.items()):
             stamps = d.data["timestamp"]
             inv.add_counts(name, len(stamps), int(stamps.min()), int(stamps.max()))
+        # the log's span as pyulog and ulog_info give it (header start to last timestamp): a topic never published
+        # has timestamp 0, which must not stretch it
+        inv.first_us, inv.last_us = int(self.ulog.start_timestamp), int(self.ulog.last_timestamp)
         inv.dropouts = len(self.ulog.dropouts)
         return inv
 
