@@ -195,20 +195,23 @@ PX4_TOPICS: dict[str, list[tuple[str, str]]] = {
     "actuator_servos": [("uint64_t", "timestamp"), ("uint64_t", "timestamp_sample"), ("float[15]", "control")],
     "actuator_outputs": [("uint64_t", "timestamp"), ("uint32_t", "noutputs"), ("float[16]", "output")],
 }
-# (topic, every how many samples, publication delay after the instant in us): PX4's order within a cycle
+# (topic, every how many samples with the high-rate profile, every how many with PX4's default logging, the
+# sample the default's subsampling starts at, publication delay after the instant in us): PX4's order in a cycle
 _SCHEDULE = (
-    ("vehicle_angular_velocity", 1, 150),
-    ("vehicle_attitude", 1, 300),
-    ("vehicle_local_position", 1, 450),
-    ("actuator_servos", 1, 700),
-    ("actuator_outputs", 5, 800),
-    ("airspeed_validated", 10, 600),
-    ("wind", 50, 900),
+    ("vehicle_angular_velocity", 1, 1, 0, 150),
+    ("vehicle_attitude", 1, 2, 1, 300),
+    ("vehicle_local_position", 1, 5, 2, 450),
+    ("actuator_servos", 1, 5, 0, 700),
+    ("actuator_outputs", 5, 5, 0, 800),
+    ("airspeed_validated", 10, 10, 3, 600),
+    ("wind", 50, 50, 0, 900),
 )
 
 
-def write_px4_ulog(path: Path, flight: Px4Flight, seed: int = 0) -> None:
-    """The flight as PX4's logger writes it (see the module docstring): rates, topics, stamps."""
+def write_px4_ulog(path: Path, flight: Px4Flight, seed: int = 0, default_rates: bool = False) -> None:
+    """The flight as PX4's logger writes it (see the module docstring): rates, topics, stamps. ``default_rates``:
+    PX4's default logging instead (``vehicle_attitude`` 25 Hz here, ``vehicle_local_position`` and
+    ``actuator_servos`` 10 Hz, out of phase: the logger takes each topic's newest at its own interval)."""
     from tests.ulog_writer import ULogWriter
 
     rng = np.random.default_rng(seed)
@@ -219,8 +222,9 @@ def write_px4_ulog(path: Path, flight: Px4Flight, seed: int = 0) -> None:
         roll, pitch, yaw = flight.euler[k]
         servo = [0.0] * 15
         servo[1] = float(flight.control[k])  # the elevator: servo 2 of a PX4 plane (index 1)
-        for topic, every, delay in _SCHEDULE:
-            if k % every:
+        for topic, every_high, every_default, phase, delay in _SCHEDULE:
+            every = every_default if default_rates else every_high
+            if (k - (phase if default_rates else 0)) % every:
                 continue
             stamp = t + delay + int(rng.integers(0, 1000))
             if topic == "vehicle_angular_velocity":

@@ -5,6 +5,7 @@ PX4's topic names and rates, α derived from the NED velocity and the attitude q
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -86,3 +87,24 @@ def _f_hat_after(log: Path, plant: Path, gains: Path, k0: int) -> np.ndarray:
     fleet = Fleet(load_model(str(plant), gains, layouts=ulog.layouts))
     records = analyse_dataflash(ulog, fleet, AlarmConfig()).records
     return np.array([r.f_hat[0] for r in records if r.k >= k0])
+
+
+def test_px4_s_default_logging_rates_take_the_default_logging_map(tmp_path: Path, capsys) -> None:
+    """The same kind of flight at PX4's default logging rates (servos and velocity 10 Hz, attitude 25 Hz, out of
+    phase): the high-rate map makes no sample and says which topics are slower than its instant; the page's
+    default-logging map (the actuator's topic as instant, the rest latest values) identifies the short period."""
+    flight = fly(60.0, lead_in=5.0, seed=3, airspeed_kt=90.0)
+    log = tmp_path / "default.ulg"
+    write_px4_ulog(log, flight, default_rates=True)
+    for name in ("px4-fixed-wing.toml", "px4-fixed-wing-default-logging.toml"):
+        (tmp_path / name).write_text(file_block(name).text)
+    argv = ["identify", str(log), "--model", "short-period", "--out", str(tmp_path / "p.toml"), "--signals"]
+    assert main([*argv, str(tmp_path / "px4-fixed-wing.toml")]) == 2
+    err = capsys.readouterr().err
+    slower = r"vehicle_local_position 9\.\d+ Hz, vehicle_attitude 2[\d.]+ Hz, actuator_servos 9\.\d+ Hz slower than"
+    assert re.search(slower + r" the instant \(vehicle_angular_velocity [\d.]+ Hz\)", err), err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert main([*argv, str(tmp_path / "px4-fixed-wing-default-logging.toml"), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["h"] == pytest.approx(0.1, rel=1e-3)
+    assert report["fit_percent"]["alpha"] > 80 and report["fit_percent"]["q"] > 70, report["fit_percent"]

@@ -349,11 +349,37 @@ def why_no_samples(inventory: LogInventory, smap, names: Sequence[str], sysid: i
     if missing is not None:
         return missing
     messages = ", ".join(dict.fromkeys([smap.instant, *(m for n in names for m in smap.messages_of(n))]))
-    return (
+    line = (
         f"every message the signal map reads is in the log ({messages}), but they never made one sample at "
         f"h = {h:g} s: their time stamps must fall within h/2 of the instant message's (the log's own "
         "sample spacing is a good h)"
     )
+    slower = _slower_than_instant(inventory, smap, names, sysid)
+    if slower:
+        instant = inventory._with_rate(_stats(inventory, smap.instant, sysid))
+        line += (
+            f"; {', '.join(slower)} slower than the instant ({instant}): give the signals of the slower ones a "
+            "'hold' of a little more than their period (latest values; the actuator's cannot), or take the instant "
+            "from the actuator's message"
+        )
+    return line
+
+
+def _stats(inventory: LogInventory, name: str, sysid: int | None) -> MessageStats:
+    return next((m for m in inventory.messages(sysid) if m.name == name), MessageStats(name, None))
+
+
+def _slower_than_instant(inventory: LogInventory, smap, names: Sequence[str], sysid: int | None) -> list[str]:
+    """The timed messages the samples need that the log holds markedly fewer of than the instant's (with rates)."""
+    instant = _stats(inventory, smap.instant, sysid).count
+    timed = dict.fromkeys(
+        smap.raw[n].message for n in smap.read_from(names) if smap.raw[n].timed and smap.raw[n].message != smap.instant
+    )
+    return [
+        inventory._with_rate(stats)
+        for stats in (_stats(inventory, m, sysid) for m in timed)
+        if 0 < stats.count < 0.9 * instant
+    ]
 
 
 def read_inventory(path: str | Path) -> LogInventory:
