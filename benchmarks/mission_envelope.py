@@ -133,6 +133,9 @@ def main() -> int:
         "--schedule", action="append", help="the envelope's schedule signal(s) (default: airspeed); give twice for two"
     )
     p.add_argument("--model", default="short-period", help="identify's --model for every leg (default: short-period)")
+    p.add_argument(
+        "--known-input", action="append", default=[], help="identify's --known-input for every leg (e.g. throttle)"
+    )
     p.add_argument("--speedup", type=float, default=20.0)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--work", help="keep the files here (default: a temporary directory)")
@@ -150,9 +153,8 @@ def main() -> int:
     for leg, a, b in legs(id_mission):
         plants.append(work / f"c172p-{leg}.toml")
         window = f"{a - 2:g}:{b:g}"
-        _monitor(
-            "identify", str(id_log), "--model", args.model, "--out", str(plants[-1]), "--window", window, "--name", leg
-        )
+        known = [a for name in args.known_input for a in ("--known-input", name)]
+        _monitor("identify", str(id_log), "--model", args.model, *known, "--out", str(plants[-1]), "--window", window)
     env, env_gains, one_gains = work / "c172p-env.toml", work / "c172p-env-gains.toml", work / "c172p-one-gains.toml"
     _monitor("envelope", *map(str, plants), *(a for s in schedule for a in ("--schedule", s)), "--out", str(env))
     start = time.monotonic()

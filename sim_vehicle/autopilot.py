@@ -202,11 +202,19 @@ class Autopilot:
         self.throttle = trim.throttle
         self.pitch_cmd_deg = trim.theta_deg
 
-    def step(self, fdm: Properties, targets: Targets, excitation_deg: float = 0.0, hold: bool = False) -> float:
+    def step(
+        self,
+        fdm: Properties,
+        targets: Targets,
+        excitation_deg: float = 0.0,
+        hold: bool = False,
+        throttle_excitation: float = 0.0,
+    ) -> float:
         """One JSBSim step: shape the references, run the loops, write aileron/rudder/throttle; the elevator (deg).
 
         ``hold`` (an identification leg, one with ``excite``): the throttle and the elevator stay where they were
-        when the leg began and the PRBS is added to that elevator, while the lateral loops keep the wings level,
+        when the leg began and the PRBS is added to that elevator (and ``throttle_excitation``, a fraction of full
+        throttle, to that throttle: a leg with ``excite_throttle``), while the lateral loops hold the segment's bank,
         as a test pilot holds stick and throttle through an identification manoeuvre. Why: with the pitch and
         airspeed loops closed, the throttle answers the PRBS, an input the identified model does not have (on
         c172p the one-trim model then read 1.9 deg of fault in the leg), and the loops filter the excitation.
@@ -262,7 +270,7 @@ class Autopilot:
         ramping = self.airspeed_ref != targets.airspeed_kt
         if not ramping and (0.0 < throttle < 1.0 or (throttle >= 1.0) != (speed_error > 0)):
             self._throttle_i += g.speed_i * speed_error * dt
-        self.throttle = _clip(throttle, 0.0, 1.0) if self._held is None else self._held[1]
+        self.throttle = _clip(throttle if self._held is None else self._held[1] + throttle_excitation, 0.0, 1.0)
         for name in self.throttles:
             fdm[name] = self.throttle
 

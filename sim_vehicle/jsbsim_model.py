@@ -528,7 +528,13 @@ class JSBSimFlightModel:
         assert pilot is not None and timeline is not None  # fly() checked
         t = self.n * self.dt
         segment, excitation = timeline.at(t)
-        self._own = pilot.step(self.fdm, segment.targets, excitation, hold=segment.excite is not None)
+        self._own = pilot.step(
+            self.fdm,
+            segment.targets,
+            excitation,
+            hold=segment.excite is not None,
+            throttle_excitation=timeline.throttle_at(t) / 100.0,
+        )
         if pilot.trouble is not None:
             what, why = pilot.trouble
             raise FlightModelError(f"{self.name}: {what} in segment '{segment.name}' at t = {t:.1f} s: {why}")

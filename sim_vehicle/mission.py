@@ -45,7 +45,12 @@ from sim_vehicle.autopilot import Targets
 
 __all__ = ["Segment", "Mission", "Timeline", "load_mission", "parse_mission", "MAX_BANK_DEG", "SEGMENT_KEYS"]
 
-SEGMENT_KEYS = ("name", "duration", "airspeed", "altitude", "climb", "bank", "heading", "excite")
+SEGMENT_KEYS = ("name", "duration", "airspeed", "altitude", "climb", "bank", "heading", "excite", "excite_throttle")
+THROTTLE_SEED = 0x7A  # the throttle's PRBS is seeded apart from the elevator's: two independent inputs
+# ... and dwells 2-6 s between switches, not the elevator's 0.2-0.8 s: an engine and its propeller answer a throttle
+# step in a second or more (c172p: a 0.2-0.8 s PRBS of +-8 % moved the identified pitching moment by nothing
+# measurable, where the slow-down's throttle moves the elevator's trim by about 0.03 deg per percent)
+THROTTLE_DWELL_S = (2.0, 6.0)
 MAX_BANK_DEG = 75.0  # n = 3.9 g in a level turn: beyond a light aircraft's limit load (3.8 g)
 
 
@@ -62,6 +67,7 @@ class Segment:
     bank_deg: float | None = None
     heading_deg: float | None = None
     excite: Excitation | None = None
+    excite_throttle: Excitation | None = None  # a PRBS of +-AMP percent on the held throttle (needs ``excite``)
 
     @cached_property
     def targets(self) -> Targets:
@@ -92,26 +98,47 @@ class Mission:
         return f"{self.source} ({len(self.segments)} segments, {self.duration:g} s)"
 
 
+def _levels(
+    excitation: Excitation | None, h: float, seed: int, dwell: tuple[float, float] | None = None
+) -> list[float]:
+    if excitation is None:
+        return []
+    signs = excitation.signs(h, seed) if dwell is None else excitation.signs(h, seed, dwell)
+    return [sign * excitation.amplitude for sign in signs]
+
+
 class Timeline:
-    """Which segment is flown at time t, and the PRBS level it adds to the elevator then (times never go back)."""
+    """Which segment is flown at time t, and the PRBS levels it adds to the elevator and the throttle then (times
+    never go back)."""
 
     def __init__(self, mission: Mission, h: float, seed: int) -> None:
         self.mission = mission
         self.h = h
         self.index = 0
-        self._levels = [
-            [sign * s.excite.amplitude for sign in s.excite.signs(h, seed + i)] if s.excite is not None else []
+        self._levels = [_levels(s.excite, h, seed + i) for i, s in enumerate(mission.segments)]
+        self._throttle = [
+            _levels(s.excite_throttle, h, seed + i + THROTTLE_SEED, THROTTLE_DWELL_S)
             for i, s in enumerate(mission.segments)
         ]
 
-    def at(self, t: float) -> tuple[Segment, float]:
-        """The segment flown at ``t`` (the last one after the mission's end) and its excitation (deg)."""
+    def _i(self, t: float) -> tuple[Segment, int]:
         segments = self.mission.segments
         while self.index + 1 < len(segments) and t >= segments[self.index + 1].start - 1e-9:
             self.index += 1
-        segment, levels = segments[self.index], self._levels[self.index]
-        i = int(math.floor((t - segment.start) / self.h + 1e-9))
+        segment = segments[self.index]
+        return segment, int(math.floor((t - segment.start) / self.h + 1e-9))
+
+    def at(self, t: float) -> tuple[Segment, float]:
+        """The segment flown at ``t`` (the last one after the mission's end) and its elevator excitation (deg)."""
+        segment, i = self._i(t)
+        levels = self._levels[self.index]
         return segment, levels[i] if 0 <= i < len(levels) else 0.0
+
+    def throttle_at(self, t: float) -> float:
+        """The throttle's excitation at ``t`` (percent; 0 outside a leg's ``excite_throttle``)."""
+        _segment, i = self._i(t)
+        levels = self._throttle[self.index]
+        return levels[i] if 0 <= i < len(levels) else 0.0
 
 
 def load_mission(path: str | Path) -> Mission:
@@ -182,17 +209,31 @@ def _segment(table: Mapping[str, Any], start: float, where: str, first: bool) ->
         raise UserError(f"{where}: needs exactly one of 'bank' and 'heading'")
     if first and altitude is None:
         raise UserError(f"{where}: key 'altitude': missing (the aircraft is trimmed at the first segment's altitude)")
-    excite = None
-    if "excite" in table:
-        text = table["excite"]
-        if not isinstance(text, str):
-            raise UserError(f"{where}: key 'excite': expected a string such as \"prbs:1:30\", got {text!r}")
-        try:
-            excite = parse_excite_spec(text)
-        except UserError as exc:
-            raise UserError(f"{where}: key 'excite': {exc}") from None
-        if excite is not None and excite.seconds > duration + 1e-9:
-            raise UserError(
-                f"{where}: key 'excite': the PRBS lasts {excite.seconds:g} s, longer than the segment ({duration:g} s)"
-            )
-    return Segment(name, start, duration, airspeed, altitude, climb, bank, heading, excite)
+    excite = _prbs(table, "excite", where, duration, "prbs:1:30")
+    if "excite_throttle" in table and excite is None:
+        raise UserError(
+            f"{where}: key 'excite_throttle' needs 'excite' (the throttle is excited in an identification leg, "
+            "where it is held)"
+        )
+    excite_throttle = _prbs(table, "excite_throttle", where, duration, "prbs:5:30")
+    if excite_throttle is not None and not excite_throttle.amplitude <= 50.0:
+        raise UserError(f"{where}: key 'excite_throttle': the amplitude is in percent of throttle, at most 50")
+    return Segment(name, start, duration, airspeed, altitude, climb, bank, heading, excite, excite_throttle)
+
+
+def _prbs(table: Mapping[str, Any], key: str, where: str, duration: float, example: str) -> Excitation | None:
+    """A segment's PRBS key (``excite``, ``excite_throttle``): None when absent or "none"; one line when wrong."""
+    if key not in table:
+        return None
+    text = table[key]
+    if not isinstance(text, str):
+        raise UserError(f"{where}: key '{key}': expected a string such as \"{example}\", got {text!r}")
+    try:
+        excitation = parse_excite_spec(text)
+    except UserError as exc:
+        raise UserError(f"{where}: key '{key}': {exc}") from None
+    if excitation is not None and excitation.seconds > duration + 1e-9:
+        raise UserError(
+            f"{where}: key '{key}': the PRBS lasts {excitation.seconds:g} s, longer than the segment ({duration:g} s)"
+        )
+    return excitation

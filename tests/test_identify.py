@@ -416,3 +416,12 @@ def test_a_window_without_a_leg_is_one_line(c172p_flight, tmp_path: Path, window
     lines = stderr.strip().splitlines()
     assert code == 2 and stdout == "" and len(lines) == 1 and message in lines[0], stderr
     assert not (tmp_path / "p.toml").exists()
+
+
+def test_a_known_input_that_does_not_move_or_is_a_state_is_one_line(c172p_flight) -> None:
+    out = c172p_flight["work"] / "known.toml"
+    code, _stdout, stderr = _identify(str(c172p_flight["log"]), "--known-input", "throttle", "--out", str(out))
+    assert code == 2 and "--known-input throttle: it does not move over the log" in stderr
+    assert stderr.count("\n") == 1 and not out.exists()
+    code, _stdout, stderr = _identify(str(c172p_flight["log"]), "--known-input", "q", "--out", str(out))
+    assert code == 2 and "--known-input q: it is a state or the actuator of the model" in stderr

@@ -143,6 +143,16 @@ GOOD = {"name": "a", "duration": 10, "airspeed": 90, "altitude": 3000, "bank": 0
         ({"segment": [{**GOOD, "excite": "prbs:1"}]}, "segment 1 ('a'): key 'excite': bad --excite SPEC 'prbs:1'"),
         ({"segment": [{**GOOD, "excite": 1}]}, "segment 1 ('a'): key 'excite': expected a string"),
         ({"segment": [{**GOOD, "excite": "prbs:1:30"}]}, "the PRBS lasts 30 s, longer than the segment (10 s)"),
+        ({"segment": [{**GOOD, "excite_throttle": "prbs:5:5"}]}, "key 'excite_throttle' needs 'excite'"),
+        (
+            {"segment": [{**GOOD, "excite": "prbs:1:5", "excite_throttle": "prbs:60:5"}]},
+            "key 'excite_throttle': the amplitude is in percent of throttle, at most 50",
+        ),
+        (
+            {"segment": [{**GOOD, "excite": "prbs:1:5", "excite_throttle": "prbs:5:20"}]},
+            "key 'excite_throttle': the PRBS lasts 20 s, longer than the segment (10 s)",
+        ),
+        ({"segment": [{**GOOD, "excite": "prbs:1:5", "excite_throttle": 5}]}, "key 'excite_throttle': expected a"),
         ({"segment": [GOOD], "speed": 3}, "unknown key 'speed' (a mission file holds [[segment]] tables only)"),
         ({}, "expected one or more [[segment]] tables"),
     ],
@@ -164,6 +174,19 @@ def test_a_file_that_is_not_toml_or_not_there_is_one_line(tmp_path: Path) -> Non
         load_mission(bad)
     with pytest.raises(UserError, match=r"^--mission .*none.toml: cannot read: "):
         load_mission(tmp_path / "none.toml")
+
+
+def test_the_throttle_prbs_is_slow_and_independent_of_the_elevator_s() -> None:
+    m = mission(segment("a", 1, 90), segment("b", 60, 90, excite="prbs:1:50", excite_throttle="prbs:8:50"))
+    timeline = m.timeline(0.05, seed=4)
+    times = [1.0 + 0.05 * i + 0.01 for i in range(1000)]
+    elevator = np.array([timeline.at(t)[1] for t in times])
+    throttle = np.array([timeline.throttle_at(t) for t in times])
+    assert set(throttle) == {-8.0, 8.0} and set(elevator) == {-1.0, 1.0}
+    switches = np.flatnonzero(np.diff(throttle))
+    assert len(switches) >= 5 and np.diff(switches).min() >= 2.0 / 0.05 - 1  # dwells of 2 s and more
+    assert abs(np.corrcoef(elevator, throttle)[0, 1]) < 0.2  # two inputs, not one
+    assert timeline.throttle_at(0.5) == 0.0 and timeline.throttle_at(55.0) == 0.0  # outside the PRBS: none
 
 
 def test_the_timeline_names_the_segment_flown_and_its_prbs_level() -> None:
@@ -347,3 +370,12 @@ def test_an_identification_leg_holds_stick_and_throttle_and_reports_each_prbs_sw
         assert s.autopilot_elevator == pytest.approx(held + t["excitation"], abs=1e-9), s.k
         assert s.elevator_deg == pytest.approx(s.autopilot_elevator, abs=1e-9)  # no compensation: the report is it
         assert t["throttle"] == pytest.approx(first_truth["throttle"], abs=1e-12)  # the throttle held
+    # with excite_throttle, the held throttle plus its PRBS (in fractions of full throttle)
+    plan = mission(segment("level", 2, 100), segment("prbs", 6, 100, excite="prbs:1:5", excite_throttle="prbs:5:5"))
+    sim, rec, stopped = fly("c172p", plan)
+    assert stopped is None
+    leg = [t for t in rec.truth if t["segment"] == "prbs"]
+    timeline = plan.timeline(sim.h, seed=0)
+    held = leg[0]["throttle"] - timeline.throttle_at(2.0) / 100.0
+    assert {round(t["throttle"] - held, 9) for t in leg[:-20]} <= {0.05, -0.05}
+    assert len({t["throttle"] for t in leg}) >= 2

@@ -110,6 +110,16 @@ def register(subparsers) -> None:
         "first one (a mission's identification leg at one operating point; fault-monitor envelope assembles the "
         "plants of several legs); default: the whole log",
     )
+    p.add_argument(
+        "--known-input",
+        action="append",
+        default=[],
+        metavar="SIGNAL",
+        dest="known_inputs",
+        help="a measured signal the model takes as an input besides the elevator, identified with it and written as "
+        "a [known_inputs.linear] column (not a fault): e.g. throttle, which moves with every change of speed; the "
+        "log must move it (a mission leg's excite_throttle). Repeat for several",
+    )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=run)
 
@@ -140,6 +150,7 @@ def run(args: argparse.Namespace) -> int:
         sysid=args.sysid,
         name=args.name,
         window=args.window,
+        known_inputs=tuple(args.known_inputs),
     )
     done = identify_log(req, say=lambda text: print(f"identify: {text}", file=sys.stderr, flush=True))
     if args.json:

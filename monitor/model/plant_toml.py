@@ -87,9 +87,15 @@ def plant_toml(
     ``signals`` is the ``[signals]`` table without ``operating_point`` (added here) and with ``measured`` and
     ``command`` sub-tables. ``D_cf = B_c`` (an elevator fault), ``D_cd`` = the alpha column of ``A_c`` (a
     vertical gust is an angle-of-attack disturbance, in degrees), ``C`` = identity of the states. ``condition``:
-    the other measured signals' means where the model was identified (``[signals] condition``), if any.
+    the other measured signals' means where the model was identified (``[signals] condition``), if any. Inputs
+    after the first (the elevator) are known inputs: their columns of ``B_c`` go to ``[known_inputs.linear]`` and
+    their trims to ``condition`` (over the mean the caller measured), not to the plant's ``B_c``.
     """
     n = len(result.state_names)
+    known = list(result.input_names[1:])
+    B_c = result.B_c[:, :1]
+    condition = dict(condition or {})
+    condition.update({name: result.operating_point[name] for name in known})
     if "alpha" not in result.state_names:
         raise ValueError("the gust input D_cd needs alpha among the states")
     gust = result.A_c[:, [result.state_names.index("alpha")]]
@@ -102,8 +108,8 @@ def plant_toml(
         ("tau_min", float(tau_min)),
         ("tau_max", float(tau_max)),
         ("A_c", result.A_c),
-        ("B_c", result.B_c),
-        ("D_cf", result.B_c),
+        ("B_c", B_c),
+        ("D_cf", B_c),
         ("D_cd", gust),
         ("C", np.eye(n)),
     ]
@@ -116,7 +122,7 @@ def plant_toml(
     plain = {key: v for key, v in signals.items() if not isinstance(v, dict)}
     for key, value in plain.items():
         lines.append(f"{key} = {_value(value)}")
-    op = {s: _round(result.operating_point[s], 7) for s in (*result.state_names, *result.input_names)}
+    op = {s: _round(result.operating_point[s], 7) for s in (*result.state_names, *result.input_names[:1])}
     lines.append(f"operating_point = {_value(op)}")
     if condition:
         lines.append(f"condition = {_value({s: _round(v, 7) for s, v in condition.items()})}")
@@ -150,4 +156,14 @@ def plant_toml(
         if not all(math.isfinite(v) for v in (mode.wn, mode.zeta)):
             entry = {"name": mode.name, "eigenvalues": [_round(e.real) for e in mode.eigenvalues]}
         lines += ["[[identification.modes]]", *(f"{key} = {_value(value)}" for key, value in entry.items())]
+    if known:
+        lines += [
+            "",
+            "[known_inputs.linear]",
+            "# identified with the elevator: each one's column of B_c (state units per its unit), acting on its",
+            "# deviation from its trim in [signals] condition; the estimator adds it to its prediction (not a fault)",
+        ]
+        lines += [
+            f"{_key(name)} = {_value([_round(float(v)) for v in result.B_c[:, 1 + i]])}" for i, name in enumerate(known)
+        ]
     return "\n".join(lines) + "\n"

@@ -47,11 +47,11 @@ __all__ = [
 KNOWN_INPUT_SIGNALS = ("roll", "r")  # recorded by the plant's map if the identify map measures them
 # the flight condition (``[signals] condition``): recorded, and averaged over the identified stretch, when the map
 # measures them and they are not states: what an envelope is scheduled on (airspeed, bank) and the known inputs read
-CONDITION_SIGNALS = ("airspeed", *KNOWN_INPUT_SIGNALS)
+CONDITION_SIGNALS = ("airspeed", *KNOWN_INPUT_SIGNALS, "throttle")
 # identify's default map for an aircraft's telemetry: the longitudinal states, the elevator and what the turn's
 # known inputs need, built from the sample's one definition (monitor.wire.telemetry) as the live default map is
 IDENTIFY_SIGNALS_TOML = contract_signals_toml(
-    ["alpha", "q", "theta", "airspeed", "elevator", *KNOWN_INPUT_SIGNALS], ranges=False
+    ["alpha", "q", "theta", "airspeed", "elevator", *KNOWN_INPUT_SIGNALS, "throttle"], ranges=False
 )
 
 DEFAULT_ACTUATOR_LIMIT = 25.0
@@ -76,9 +76,10 @@ def _signals_table(path: str | None) -> tuple[dict[str, Any], str]:
     return raw["signals"], str(path)
 
 
-def map_for(table: dict[str, Any], source: str, states: tuple[str, ...], layouts=None):
+def map_for(table: dict[str, Any], source: str, states: tuple[str, ...], layouts=None, known: tuple[str, ...] = ()):
     """``(SignalMap, written)``: the project's signal map of ``states`` and the actuator, and the ``[signals]``
-    table for the plant file (without its operating point, which the identification adds)."""
+    table for the plant file (without its operating point, which the identification adds); ``known``: the known
+    inputs, which the map must measure too."""
     from monitor.errors import UserError
     from monitor.link.signals import parse_signals
 
@@ -89,10 +90,16 @@ def map_for(table: dict[str, Any], source: str, states: tuple[str, ...], layouts
     actuator = [actuator] if isinstance(actuator, str) else actuator
     if not isinstance(actuator, list) or len(actuator) != 1 or not isinstance(actuator[0], str):
         raise UserError(f"{source}: [signals] 'actuator' must name the one elevator signal")
-    missing = [s for s in (*states, actuator[0]) if s not in measured]
+    for name in known:
+        if name in (*states, actuator[0]):
+            raise UserError(
+                f"--known-input {name}: it is a state or the actuator of the model, not an input besides them"
+            )
+    missing = [s for s in (*states, actuator[0], *known) if s not in measured]
     if missing:
         raise UserError(
-            f"{source}: [signals.measured] has no '{missing[0]}' (identify needs {', '.join((*states, actuator[0]))})"
+            f"{source}: [signals.measured] has no '{missing[0]}' (identify needs "
+            f"{', '.join((*states, actuator[0], *known))})"
         )
     written: dict[str, Any] = {
         "instant": table.get("instant", "AOA_SSA"),
@@ -154,6 +161,8 @@ class IdentifyRequest:
     # (start, end) in seconds from the vehicle's first sample in the log: one leg of a longer flight (a mission's
     # identification leg at one airspeed); None: the whole log
     window: tuple[float, float] | None = None
+    # measured signals identified as inputs besides the elevator (throttle), written as [known_inputs.linear]
+    known_inputs: tuple[str, ...] = ()
 
     @property
     def plant_name(self) -> str:
@@ -322,7 +331,7 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
         )
         raise UserError(f"{req.log}: {dlog.layouts.no_map()}; the log has {hints}")
     table, source = _signals_table(req.signals)
-    smap, written = map_for(table, source, states, dlog.layouts if dlog is not None else None)
+    smap, written = map_for(table, source, states, dlog.layouts if dlog is not None else None, req.known_inputs)
     h_read, ratio, tau_max = _periods(req, smap, dlog)
     h = h_read * ratio
 
@@ -354,7 +363,15 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
         rows = _decimate(rows, ratio, actuator)
     k = np.array([r[0] for r in rows], dtype=np.int64)
     X = np.array([[v.get(s, math.nan) for s in states] for _k, v in rows], dtype=float).reshape(len(rows), len(states))
-    U = np.array([[v.get(actuator, math.nan)] for _k, v in rows], dtype=float).reshape(len(rows), 1)
+    inputs = (actuator, *req.known_inputs)
+    U = np.array([[v.get(s, math.nan) for s in inputs] for _k, v in rows], dtype=float).reshape(len(rows), len(inputs))
+    for j, name in enumerate(req.known_inputs, start=1):
+        moved = np.nanmax(U[:, j]) - np.nanmin(U[:, j]) if np.isfinite(U[:, j]).any() else 0.0
+        if not moved > 0.0:
+            raise UserError(
+                f"--known-input {name}: it does not move over the log (spread {moved:g}): its effect cannot be "
+                "identified (a mission leg with excite_throttle moves the throttle)"
+            )
     units = tuple(
         str(written["measured"][s].get("unit", "")) if isinstance(written["measured"][s], dict) else "" for s in states
     )
@@ -366,7 +383,7 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
             "validating"
         )
     result = identify(
-        FlightData(h=h, k=k, states=X, inputs=U, state_names=states, input_names=(actuator,), state_units=units)
+        FlightData(h=h, k=k, states=X, inputs=U, state_names=states, input_names=inputs, state_units=units)
     )
     seconds = time.perf_counter() - started
 

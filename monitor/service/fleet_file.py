@@ -79,6 +79,8 @@ class EnvelopeModel:
     offset_rows: np.ndarray
     y0_rows: np.ndarray
     u0_rows: np.ndarray
+    # each linear known input's trim (the points' [signals] condition), one value per point: interpolated too
+    input_trim_rows: dict[str, np.ndarray]
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -220,9 +222,22 @@ def load_envelope_model(
         np.array(offsets),
         np.array([m.signals.y0 for m in points], dtype=float),
         np.array([m.signals.u0 for m in points], dtype=float),
+        _input_trims(envelope.name, points),
     )
     first = points[0]
     return VehicleModel(first.plant, first.gains, first.estimator, first.signals, scheduled)
+
+
+def _input_trims(name: str, points: list[VehicleModel]) -> dict[str, np.ndarray]:
+    """The linear known inputs' trims per point; the points must share those inputs (one line otherwise)."""
+    known = [m.plant.known_inputs for m in points]
+    names = [tuple(k.linear) if k is not None else () for k in known]
+    if any(n != names[0] for n in names):
+        raise UserError(
+            f"envelope '{name}': its points' [known_inputs.linear] name different signals ({names[0]} and "
+            f"{next(n for n in names if n != names[0])}); identify every leg with the same --known-input"
+        )
+    return {s: np.array([k.trim[s] for k in known if k is not None]) for s in names[0]}
 
 
 class Fleet:

@@ -100,6 +100,7 @@ class Vehicle:
         "outside_episode",
         "switches",
         "trim",
+        "input_trim",
     )
 
     def __init__(
@@ -147,6 +148,7 @@ class Vehicle:
         # an envelope model: (state offset, y0, u0) of the trim interpolated at the last sample, the deviations'
         # origin (None before the first sample)
         self.trim: tuple[np.ndarray, tuple[float, ...], tuple[float, ...]] | None = None
+        self.input_trim: dict[str, float] | None = None  # ... and the linear known inputs' trims
 
 
 @dataclass
@@ -410,7 +412,7 @@ class VehicleTable:
         y, u_report = sig.deviations(values, y0, u0)
         est = model.estimator
         ki = est.plant.known_inputs  # [known_inputs]: the turn's terms from the sample's values (None: without)
-        known = ki.vector(values) if ki is not None else None
+        known = ki.vector(values, vehicle.input_trim) if ki is not None else None
         applied = None
         compensation: list[float] | None = None
         if self.observe:
@@ -482,6 +484,7 @@ class VehicleTable:
                     old, new = vehicle.trim[2], trim[2]
                     vehicle.last_command = [c + a - b for c, a, b in zip(vehicle.last_command, old, new, strict=True)]
             vehicle.trim = trim
+            vehicle.input_trim = {name: float(weights @ rows) for name, rows in env.input_trim_rows.items()}
         if previous is not None and point != previous:
             vehicle.switches += 1
             log.info(

@@ -415,12 +415,13 @@ class Excitation:
         """How many samples carry a PRBS level (the next one returns to trim)."""
         return max(1, int(round(self.seconds / h)))
 
-    def signs(self, h: float, seed: int) -> list[int]:
-        """+1/-1 per sample for ``samples(h)`` samples: seeded random switching with dwell in [0.2, 0.8] s."""
+    def signs(self, h: float, seed: int, dwell: tuple[float, float] = (MIN_DWELL_S, MAX_DWELL_S)) -> list[int]:
+        """+1/-1 per sample for ``samples(h)`` samples: seeded random switching with dwell in ``dwell`` seconds
+        ([0.2, 0.8] s: the elevator's; a mission's throttle PRBS dwells longer, as an engine answers in seconds)."""
         n = self.samples(h)
         rng = np.random.default_rng([seed, 0xE7C1])
-        shortest = max(1, int(math.ceil(MIN_DWELL_S / h - 1e-9)))
-        longest = max(shortest, int(math.floor(MAX_DWELL_S / h + 1e-9)))
+        shortest = max(1, int(math.ceil(dwell[0] / h - 1e-9)))
+        longest = max(shortest, int(math.floor(dwell[1] / h + 1e-9)))
         sign = 1 if rng.random() < 0.5 else -1
         out: list[int] = []
         while len(out) < n:
