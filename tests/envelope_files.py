@@ -21,6 +21,7 @@ import tomllib
 
 import numpy as np
 
+from monitor.model.closed_loop import Gains
 from tests.aircraft_files import AIRCRAFT_PLANT, OP
 
 # exponents of V / V0 for each entry of A_c (rows and columns: alpha, q, theta, airspeed) and of B_c
@@ -103,3 +104,41 @@ def no_common_p_pair() -> str:
         f'[[point]]\nname = "a"\nat = {{ airspeed = 30.0 }}\n[point.plant]\n{pair_plant_table(A1)}\n'
         f'[[point]]\nname = "b"\nat = {{ airspeed = 40.0 }}\n[point.plant]\n{pair_plant_table(A2)}'
     )
+
+
+# A short-period model (alpha, q; elevator) with airspeed a measured signal that is not an output; the gains are a
+# certified design of it copied here (a design takes a second).
+A_C = np.array([[-2.36, 0.956], [-20.5, -4.38]])
+B_C = np.array([[-0.155], [-13.8]])
+SP_GAINS = Gains(
+    L=np.array([[0.5268014, 0.08822641], [-0.28176835, 1.76230559]]),
+    M=np.array([[-0.36030215, -1.62308954]]),
+    K1=np.array([[-0.24775598, 0.09584355]]),
+    K2=np.array([[0.76695437]]),
+    K3=np.array([[-0.23304563]]),
+)
+
+
+def short_period(alpha: float, q: float, elevator: float) -> str:
+    return f"""form = "continuous"
+h = 0.05
+tau_min = 0.0
+tau_max = 0.023
+A_c = {A_C.tolist()}
+B_c = {B_C.tolist()}
+D_cf = {B_C.tolist()}
+D_cd = {A_C[:, [0]].tolist()}
+C = [[1.0, 0.0], [0.0, 1.0]]
+[actuator]
+limit = 25.0
+[signals]
+instant = "AOA_SSA"
+outputs = ["alpha", "q"]
+actuator = ["elevator"]
+operating_point = {{ alpha = {float(alpha)!r}, q = {float(q)!r}, elevator = {float(elevator)!r} }}
+[signals.measured]
+alpha = {{ field = "AOA_SSA.AOA", unit = "deg" }}
+q = {{ field = "ATTITUDE.pitchspeed", scale = 57.29577951308232, unit = "deg/s" }}
+elevator = {{ field = "ACTUATOR_OUTPUT_STATUS.actuator[0]", unit = "deg" }}
+airspeed = {{ field = "VFR_HUD.airspeed", unit = "m/s" }}
+"""

@@ -11,7 +11,6 @@ instant (TimeUS), as a real autopilot writes them. The text form (``.log``, what
 from __future__ import annotations
 
 import json
-import random
 import struct
 from pathlib import Path
 
@@ -20,118 +19,16 @@ import pytest
 
 from monitor.cli import main
 from monitor.errors import UserError
-from tests.dataflash_formats import FORMATS
-
-HEAD = b"\xa3\x95"
-_STRUCT = {
-    "B": "B",
-    "H": "H",
-    "I": "I",
-    "Q": "Q",
-    "f": "f",
-    "c": "h",
-    "C": "H",
-    "h": "h",
-    "n": "4s",
-    "N": "16s",
-    "Z": "64s",
-}
-_MULT = {"c": 100.0, "C": 100.0}  # stored as hundredths: DFReader divides by 100
-ARDUPLANE_MAP = """
-[signals]
-instant = "RCOU"                  # the servo outputs' TimeUS is the sample's instant
-actuator = ["elevator"]
-[signals.measured]
-alpha = { field = "AOA.AOA", unit = "deg" }
-q = { field = "RATE.P", unit = "deg/s" }
-theta = { field = "ATT.Pitch", unit = "deg" }
-airspeed = { field = "ARSP.Airspeed", unit = "m/s" }
-elevator = { field = "RCOU.C2", scale = 0.06, offset = -90.0, unit = "deg" }
-"""
-T0_US = 183_456_789  # the autopilot's boot time at the first sample: any phase of its clock
-
-
-def _pack(name: str, values: list) -> bytes:
-    mtype, fmt, _cols = FORMATS[name]
-    scaled = [round(v * _MULT[c]) if c in _MULT else v for c, v in zip(fmt, values, strict=True)]
-    return HEAD + bytes((mtype,)) + struct.pack("<" + "".join(_STRUCT[c] for c in fmt), *scaled)
-
-
-def _fmt(name: str, formats: dict[str, tuple[int, str, str]] = FORMATS) -> bytes:
-    mtype, fmt, cols = formats[name]
-    length = 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in fmt))
-    return HEAD + b"\x80" + struct.pack("<BB4s16s64s", mtype, length, name.encode(), fmt.encode(), cols.encode())
-
-
-def write_dataflash(path: Path, samples: list[dict[str, float]], h: float, seed: int = 0, text: bool = False) -> None:
-    """Each sample k: ATT, RATE, AOA, RCOU, ARSP records stamped T0 + k h + a random 0-8 ms each, in TimeUS order;
-    FMT records first (FMT's own, then one per message), a PARM record among them."""
-    rng = random.Random(seed)
-    records: list[tuple[int, str, list]] = [(T0_US - 500_000, "PARM", [T0_US - 500_000, b"SYSID_THISMAV", 1.0])]
-    for k, s in enumerate(samples):
-        base = T0_US + round(k * h * 1e6)
-        pwm = int(s["pwm"])
-        for name, values in (
-            ("ATT", [0.0, 0.0, s["theta"], s["theta"], 90.0, 90.0, 0.0, 0.0]),
-            ("RATE", [0.0, 0.0, 0.0, s["q"], s["q"], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
-            ("AOA", [s["alpha"], 0.0]),
-            ("RCOU", [1500, pwm, 1200, 1500] + [0] * 10),
-            ("ARSP", [0, s.get("airspeed", 25.0), 100.0, 20.0]),
-        ):
-            t = base + rng.randint(0, 8000)
-            records.append((t, name, [t, *values]))
-    records.sort(key=lambda r: r[0])
-    if text:
-        lines = ["FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns"]
-        for name, (mtype, fmt, cols) in FORMATS.items():
-            length = 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in fmt))
-            lines.append(f"FMT, {mtype}, {length}, {name}, {fmt}, {cols}")
-        for _t, name, values in records:
-            cells = [
-                v.decode() if isinstance(v, bytes) else (f"{v:.9g}" if isinstance(v, float) else str(v)) for v in values
-            ]
-            lines.append(", ".join([name, *cells]))
-        path.write_text("\n".join(lines) + "\n")
-        return
-    with open(path, "wb") as fh:
-        fh.write(_fmt_fmt() + b"".join(_fmt(n) for n in FORMATS))
-        for _t, name, values in records:
-            fh.write(_pack(name, values))
-
-
-def _fmt_fmt() -> bytes:
-    return HEAD + b"\x80" + struct.pack("<BB4s16s64s", 128, 89, b"FMT", b"BBnNZ", b"Type,Length,Name,Format,Columns")
-
-
-def short_period_flight(h: float = 0.02, lead_s: float = 3.0, seconds: float = 30.0, seed: int = 1):
-    """A linear short-period aircraft (alpha deg, q deg/s; elevator deg about trim -3 deg) flown with an
-    elevator PRBS of +-1 deg, dwell 0.2-1 s: the true A_c, B_c and the samples (elevator as servo PWM)."""
-    from scipy.linalg import expm
-
-    A = np.array([[-2.0, 1.0], [-15.0, -3.0]])
-    B = np.array([[-0.2], [-12.0]])
-    M = expm(np.block([[A, B], [np.zeros((1, 3))]]) * h)
-    Ad, Bd = M[:2, :2], M[:2, 2:]
-    rng = np.random.default_rng(seed)
-    n_lead, n = round(lead_s / h), round((lead_s + seconds) / h)
-    u_dev, sign, left = [], 1.0, 0
-    for k in range(n):
-        if k < n_lead:
-            u_dev.append(0.0)
-            continue
-        if left == 0:
-            sign, left = -sign, int(rng.integers(round(0.2 / h), round(1.0 / h) + 1))
-        u_dev.append(sign)
-        left -= 1
-    trim_u, trim_alpha, x, theta = -3.0, 2.0, np.zeros(2), 2.0
-    samples = []
-    for k in range(n):
-        pwm = round(1500 + (trim_u + u_dev[k]) / 0.06)
-        u = (pwm - 1500) * 0.06 - trim_u  # what the servo flew: the PWM's own resolution
-        samples.append({"alpha": trim_alpha + x[0], "q": x[1], "theta": theta, "pwm": pwm})
-        theta += x[1] * h
-        x = Ad @ x + (Bd * u).ravel()
-    return A, B, samples
+from tests.dataflash_formats import (
+    ARDUPLANE_MAP,
+    FORMATS,
+    T0_US,
+    fmt_of_fmt,
+    fmt_record,
+    pack_record,
+    short_period_flight,
+    write_dataflash,
+)
 
 
 @pytest.fixture(scope="module")
@@ -325,7 +222,7 @@ def test_dataflash_mistakes_are_one_line_exit_2(flight, tmp_path: Path, capsys, 
         '[signals.measured]\nalpha = { field = "CTUN.Pitch" }\ne = { field = "RCOU.C2" }\n'
     )
     empty = tmp_path / "empty.bin"
-    empty.write_bytes(_fmt_fmt() + _fmt("AOA"))
+    empty.write_bytes(fmt_of_fmt() + fmt_record("AOA"))
     args = [
         a.format(
             bin=flight["bin"],
@@ -380,10 +277,12 @@ def test_a_format_record_naming_fewer_columns_than_fields_is_a_one_line_error(tm
     corrupt = dict(FORMATS, AOA=(131, "Qff", "TimeUS,AOA"))
     path = tmp_path / "corrupt.bin"
     with open(path, "wb") as fh:
-        fh.write(_fmt_fmt())
+        fh.write(fmt_of_fmt())
         for name in ("AOA", "RCOU"):
-            fh.write(_fmt(name, corrupt))
-        fh.write(_pack("AOA", [T0_US, 1.0, 0.0]) + _pack("RCOU", [T0_US, 1500, 1500, 1200, 1500] + [0] * 10))
+            fh.write(fmt_record(name, corrupt))
+        fh.write(
+            pack_record("AOA", [T0_US, 1.0, 0.0]) + pack_record("RCOU", [T0_US, 1500, 1500, 1200, 1500] + [0] * 10)
+        )
     dlog = open_dataflash(path)
     with pytest.raises(UserError, match=r"FMT record of AOA declares 3 fields but names 2 columns \(a corrupt log\)"):
         dlog.layouts("AOA")

@@ -16,33 +16,8 @@ import pytest
 from monitor.errors import UserError
 from monitor.link.derived import parse_derivation
 from monitor.link.signals import parse_signals
+from tests.derived_maps import MAVLINK_MAP
 from tests.px4_flight import T0_US, H, fly, quaternion, write_mavlink_tlog, write_px4_ulog
-
-MAVLINK_MAP = """
-[signals]
-instant = "ACTUATOR_OUTPUT_STATUS"
-outputs = ["alpha"]
-actuator = ["elevator"]
-[signals.measured]
-q = { derive = "degrees", input = "ATTITUDE.pitchspeed" }
-elevator = { derive = "control", input = "ACTUATOR_OUTPUT_STATUS.actuator[1]", throw = [-28.0, 23.0], unit = "deg" }
-[signals.measured.alpha]
-derive = "angle_of_attack"
-unit = "deg"
-range = [-30.0, 30.0]
-velocity_ned = ["LOCAL_POSITION_NED.vx", "LOCAL_POSITION_NED.vy", "LOCAL_POSITION_NED.vz"]
-attitude_euler = ["ATTITUDE.roll", "ATTITUDE.pitch", "ATTITUDE.yaw"]
-wind_ned = ["WIND_COV.wind_x", "WIND_COV.wind_y", "WIND_COV.wind_z"]
-[signals.measured.beta]
-derive = "sideslip"
-velocity_ned = ["LOCAL_POSITION_NED.vx", "LOCAL_POSITION_NED.vy", "LOCAL_POSITION_NED.vz"]
-attitude_euler = ["ATTITUDE.roll", "ATTITUDE.pitch", "ATTITUDE.yaw"]
-wind_ned = ["WIND_COV.wind_x", "WIND_COV.wind_y", "WIND_COV.wind_z"]
-[signals.measured.tas]
-derive = "airspeed"
-velocity_ned = ["LOCAL_POSITION_NED.vx", "LOCAL_POSITION_NED.vy", "LOCAL_POSITION_NED.vz"]
-wind_ned = ["WIND_COV.wind_x", "WIND_COV.wind_y", "WIND_COV.wind_z"]
-"""
 
 PX4_MAP = """
 [signals]
@@ -239,7 +214,7 @@ def test_a_derived_pwm_reads_a_dataflash_log_as_scale_and_offset_do(tmp_path: Pa
     through ``radians`` and back through ``degrees`` is q: derived signals read DataFlash logs as any other."""
     from monitor.link.dataflash import open_dataflash
     from monitor.link.flight_log import read_flight
-    from tests.test_dataflash import ARDUPLANE_MAP, short_period_flight, write_dataflash
+    from tests.dataflash_formats import ARDUPLANE_MAP, short_period_flight, write_dataflash
 
     _A, _B, samples = short_period_flight(seconds=5.0)
     path = tmp_path / "00000001.BIN"

@@ -36,7 +36,7 @@ from monitor.service.publisher import estimate_payload
 from monitor.service.vehicles import VehicleTable
 from monitor.wire.mavlink import mavlink, new_codec
 from tests.aircraft_files import AIRCRAFT_PLANT, GAINS
-from tests.envelope_files import plant_text, trim_at
+from tests.envelope_files import A_C, B_C, SP_GAINS, plant_text, short_period, trim_at
 
 DEG = 57.29577951308232
 H_US = 50_000
@@ -99,44 +99,6 @@ def c172p_envelope(directory: Path) -> tuple[Path, Path]:
     """The c172p of ``tests/envelope_files.py`` at 40, 51.4 and 62 m/s (airspeed is one of its outputs)."""
     points = [(f"v{V:g}".replace(".", "_"), V, plant_text(V)) for V in AIRSPEEDS]
     return envelope_files(directory, points, {p: GAINS for p, _V, _t in points}, name="c172p-env")
-
-
-# A short-period model (alpha, q; elevator) with airspeed a measured signal that is not an output; the gains are a
-# certified design of it copied here (a design takes a second).
-A_C = np.array([[-2.36, 0.956], [-20.5, -4.38]])
-B_C = np.array([[-0.155], [-13.8]])
-SP_GAINS = Gains(
-    L=np.array([[0.5268014, 0.08822641], [-0.28176835, 1.76230559]]),
-    M=np.array([[-0.36030215, -1.62308954]]),
-    K1=np.array([[-0.24775598, 0.09584355]]),
-    K2=np.array([[0.76695437]]),
-    K3=np.array([[-0.23304563]]),
-)
-
-
-def short_period(alpha: float, q: float, elevator: float) -> str:
-    return f"""form = "continuous"
-h = 0.05
-tau_min = 0.0
-tau_max = 0.023
-A_c = {A_C.tolist()}
-B_c = {B_C.tolist()}
-D_cf = {B_C.tolist()}
-D_cd = {A_C[:, [0]].tolist()}
-C = [[1.0, 0.0], [0.0, 1.0]]
-[actuator]
-limit = 25.0
-[signals]
-instant = "AOA_SSA"
-outputs = ["alpha", "q"]
-actuator = ["elevator"]
-operating_point = {{ alpha = {float(alpha)!r}, q = {float(q)!r}, elevator = {float(elevator)!r} }}
-[signals.measured]
-alpha = {{ field = "AOA_SSA.AOA", unit = "deg" }}
-q = {{ field = "ATTITUDE.pitchspeed", scale = 57.29577951308232, unit = "deg/s" }}
-elevator = {{ field = "ACTUATOR_OUTPUT_STATUS.actuator[0]", unit = "deg" }}
-airspeed = {{ field = "VFR_HUD.airspeed", unit = "m/s" }}
-"""
 
 
 # --- messages ------------------------------------------------------------------------------------------------------

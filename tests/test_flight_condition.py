@@ -16,7 +16,7 @@ from monitor.model.envelope import assemble_envelope, parse_envelope
 from monitor.model.flight_condition import needed_signals, schedule_value
 from monitor.model.plant import parse_plant
 from monitor.model.scheduling import make_schedule, outside_variables, trim_weights, values_in_order
-from tests.test_envelope_scheduling import short_period
+from tests.envelope_files import short_period
 
 
 def test_the_bank_load_factor_is_one_over_cos_bank_the_same_both_ways_and_needs_the_roll() -> None:

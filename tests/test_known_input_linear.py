@@ -15,7 +15,7 @@ from monitor.model.identification import FlightData, identify
 from monitor.model.plant import parse_plant
 from monitor.model.plant_toml import plant_toml
 from monitor.wire.specs import Excitation
-from tests.test_envelope_scheduling import short_period
+from tests.envelope_files import short_period
 
 THROTTLE = 'throttle = { field = "VFR_HUD.throttle", unit = "%" }'
 A_C = np.array([[-2.36, 0.956], [-20.5, -4.38]])

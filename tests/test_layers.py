@@ -160,3 +160,22 @@ def test_every_layer_is_in_the_docs() -> None:
 )
 def test_the_rules_refuse_an_upward_import(src: str, name: str) -> None:
     assert not _allowed(src, name)
+
+
+def test_no_test_module_imports_another() -> None:
+    """Helpers two test modules share live in helper modules (``tests/*_files.py``, ``tests/daemons.py``, ...): a
+    test module imported by another runs its collection twice and ties the two together."""
+    import ast
+
+    offenders = []
+    for path in sorted(ROOT.joinpath("tests").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text("utf-8"))):
+            names = (
+                [node.module or ""]
+                if isinstance(node, ast.ImportFrom)
+                else [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else []
+            )
+            offenders += [f"{path.relative_to(ROOT)}: {n}" for n in names if n.split(".")[-1].startswith("test_")]
+    assert not offenders, offenders

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from tests.daemons import Daemon, free_udp_port
+from tests.derived_maps import MAVLINK_MAP
 from tests.px4_flight import T0_US, H, fly, mavlink_samples
-from tests.test_derived_signals import MAVLINK_MAP
 
 
 def test_run_observe_derives_alpha_from_velocity_attitude_and_wind(tmp_path: Path) -> None:
