@@ -5,8 +5,6 @@ reads the log with two identified points (90 and 100 kt, ``tests/data/c172p-enve
 
 from __future__ import annotations
 
-import select
-import socket
 import time
 from pathlib import Path
 
@@ -14,12 +12,12 @@ import numpy as np
 
 from monitor.design.result import DesignResult
 from monitor.gains import read_envelope_gains, write_gains
-from monitor.link.tlog import TlogWriter
 from monitor.model.plant import load_plant
 from monitor.service.alarm import AlarmConfig
 from monitor.service.fleet_file import Fleet, load_model
 from monitor.service.offline import analyse_log
 from tests.daemons import REPO, Daemon
+from tests.mission_logs import log_mission
 
 DATA = REPO / "tests" / "data"
 ENVELOPE, ENVELOPE_GAINS = DATA / "c172p-envelope-90-100kt.toml", DATA / "c172p-envelope-90-100kt-gains.toml"
@@ -28,32 +26,8 @@ SHORT = REPO / "docs" / "examples" / "mission-short.toml"
 H = 0.05
 
 
-def log_mission(tmp_path: Path) -> Path:
-    """The short mission flown as fast as JSBSim goes, every datagram logged as a ground station would."""
-    tlog = tmp_path / "mission.tlog"
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock, TlogWriter(tlog) as writer:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
-        sock.bind(("127.0.0.1", 0))
-        port = sock.getsockname()[1]
-        args = ["run", "--aircraft", "c172p", "--mission", str(SHORT), "--speedup", "1e4", "--no-zenoh"]
-        with Daemon("sim_vehicle", [*args, "--mavlink", f"udpout:127.0.0.1:{port}"], tmp_path / "vehicle.log") as d:
-            deadline = time.monotonic() + 60.0
-            quiet_until = None
-            while time.monotonic() < deadline:
-                ready, _, _ = select.select([sock], [], [], 0.1)
-                if ready:
-                    writer.write_datagram(time.time_ns() // 1000, sock.recv(65535))
-                    continue
-                if d.proc is not None and d.proc.poll() is not None:
-                    quiet_until = quiet_until or time.monotonic() + 0.3
-                    if time.monotonic() > quiet_until:
-                        break
-            assert d.wait(10) == 0, d.log()[-3000:]
-    return tlog
-
-
 def test_the_envelope_switches_to_the_slow_point_and_reads_the_slow_down_closer_to_zero(tmp_path: Path) -> None:
-    tlog = log_mission(tmp_path)
+    tlog = log_mission(tmp_path, SHORT)
     point = read_envelope_gains(ENVELOPE_GAINS).points["c172p-100kt"]
     one_gains = tmp_path / "one-gains.toml"
     write_gains(one_gains, DesignResult("certified", point.gains, 0.0, 0.0, 0.0, 0.0, 0.0), load_plant(ONE))
