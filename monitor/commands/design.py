@@ -42,7 +42,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=int,
         default=None,
         metavar="N",
-        help="envelope plant: design the points in N processes (default: the CPU count)",
+        help="envelope plant: design the points on a local Dask cluster of N worker processes (default: the CPU "
+        "count; 1: in this process)",
+    )
+    parser.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="envelope plant: design the points on the Dask cluster whose scheduler is at ADDRESS (e.g. "
+        "tcp://10.0.0.5:8786, started with `dask scheduler` and `dask worker ADDRESS` on machines that have this "
+        "package) instead of a local one",
     )
     parser.add_argument("--method", choices=METHODS, default="certified", help="design method (default: certified)")
     parser.add_argument(
@@ -132,6 +140,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--jobs must be >= 1, got {args.jobs}")
     if is_envelope(args.plant):
         return _run_envelope(args, options)
+    if args.scheduler is not None:
+        raise UserError(
+            "--scheduler: a single-point plant is one design; only an envelope's points are designed on a cluster"
+        )
     plant = load_plant(args.plant)
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     say(
@@ -186,7 +198,9 @@ def _run_envelope(args: argparse.Namespace, options: dict) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         options.pop("max_losses", None)
-        design = design_envelope(envelope, method=args.method, jobs=args.jobs, say=say, **options)
+        design = design_envelope(
+            envelope, method=args.method, jobs=args.jobs, say=say, scheduler=args.scheduler, **options
+        )
     write_envelope_gains(args.out, design)
     if args.quiet:
         return 0

@@ -3,8 +3,8 @@
 The chain:
 
 1. **Per point**, the existing design (``run_design``: the method and objective the user chose) on the point's
-   own plant. The points are independent problems, so they run in a ``ProcessPoolExecutor`` (``jobs``
-   processes, started with ``spawn``: a solver's thread pool does not survive a ``fork``).
+   own plant. The points are independent problems, so they run on Dask (``monitor.parallel``: a local cluster
+   of ``jobs`` worker processes, or the cluster at ``scheduler``).
 2. **The common certificate**: one matrix ``P > 0`` and one bound ``g = gamma^2`` with, for every point ``i``
    (its own gains) and every vertex ``v`` of its delay polytope (``monitor.model.delay_model.b0_polytope``),
    the discrete Bounded Real Lemma for ``w = [d; Delta f] -> e_f``
@@ -33,14 +33,11 @@ covered, interpolation is not.
 
 from __future__ import annotations
 
-import contextlib
 import itertools
-import multiprocessing
 import os
 import time
 import warnings
-from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
@@ -147,53 +144,18 @@ def _certify_point(
 # Each worker process runs one small problem at a time: its BLAS and the solver's thread pool get one thread each.
 # Measured on 2 cores, 3 points of a 4-state aircraft in 2 processes: 12.4 s with the default threads (two
 # processes spinning two BLAS threads each on two cores), 2.8 s with one.
-_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "RAYON_NUM_THREADS")
-
-
-@contextlib.contextmanager
-def _one_thread_each() -> Iterator[None]:
-    """Set the thread-count variables the workers inherit (those the user set are kept), then restore ours."""
-    saved = {name: os.environ.get(name) for name in _THREAD_VARIABLES}
-    try:
-        for name in _THREAD_VARIABLES:
-            os.environ.setdefault(name, "1")
-        yield
-    finally:
-        for name, value in saved.items():
-            if value is None:
-                os.environ.pop(name, None)
-            else:
-                os.environ[name] = value
-
-
 def _run_all(
-    fn: Callable[..., T], tasks: Sequence[tuple[str, tuple[Any, ...]]], jobs: int, done: Callable[[str, T, float], None]
+    fn: Callable[..., T],
+    tasks: Sequence[tuple[str, tuple[Any, ...]]],
+    jobs: int,
+    done: Callable[[str, T, float], None],
+    scheduler: str | None = None,
 ) -> dict[str, T]:
-    """``fn(*args)`` for each ``(name, args)``, in ``jobs`` processes (in this one when 1); ``done`` as each ends."""
-    out: dict[str, T] = {}
-    t0 = time.perf_counter()
-    if jobs <= 1 or len(tasks) <= 1:
-        for name, args in tasks:
-            try:
-                out[name] = fn(*args)
-            except UserError as exc:
-                raise type(exc)(f"point '{name}': {exc}") from None
-            done(name, out[name], time.perf_counter() - t0)
-        return out
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=context) as pool:
-        with _one_thread_each():  # the workers start at these submits and copy the environment then
-            futures: dict[Future[T], str] = {pool.submit(fn, *args): name for name, args in tasks}
-        for future in as_completed(futures):
-            name = futures[future]
-            try:
-                out[name] = future.result()
-            except UserError as exc:
-                for other in futures:
-                    other.cancel()
-                raise type(exc)(f"point '{name}': {exc}") from None
-            done(name, out[name], time.perf_counter() - t0)
-    return {name: out[name] for name, _ in tasks}
+    """``fn(*args)`` per point on Dask (``monitor.parallel``: a local cluster of ``jobs`` processes, or the cluster
+    at ``scheduler``; in this process when 1); an error names its point."""
+    from monitor.parallel import run_tasks
+
+    return run_tasks(fn, tasks, jobs, done, scheduler, what="point '{}'")
 
 
 # -- the common certificate ----------------------------------------------------------------------------------------
@@ -338,6 +300,7 @@ def design_envelope(
     method: str = "certified",
     jobs: int | None = None,
     say: Say | None = None,
+    scheduler: str | None = None,
     **options: Any,
 ) -> EnvelopeDesign:
     """Each point's design (in ``jobs`` processes; default: the CPU count), then the common certificate; see the
@@ -357,8 +320,14 @@ def design_envelope(
     where = {name: _where(envelope, name) for name in names}
     workers = min(jobs, len(names))
     tell(
-        f"envelope '{envelope.name}': designing {len(names)} points ({method}) in "
-        + (f"{workers} processes" if workers > 1 else "this process")
+        f"envelope '{envelope.name}': designing {len(names)} points ({method}) "
+        + (
+            f"on the Dask cluster at {scheduler}"
+            if scheduler is not None
+            else f"on a local Dask cluster of {workers} processes"
+            if workers > 1
+            else "in this process"
+        )
     )
     count = [0]
 
@@ -369,7 +338,8 @@ def design_envelope(
             f"[{count[0]}/{len(names)}, {seconds:.1f} s]"
         )
 
-    results = _run_all(_design_point, [(n, (plants[n], method, dict(options))) for n in names], jobs, designed)
+    tasks = [(n, (plants[n], method, dict(options))) for n in names]
+    results = _run_all(_design_point, tasks, jobs, designed, scheduler)
     t_points = time.perf_counter() - t0
     t1 = time.perf_counter()
     vertices = {n: point_vertices(plants[n]) for n in names}
@@ -425,7 +395,7 @@ def design_envelope(
     t_cert = time.perf_counter() - t1
     tell(f"  common certificate: gamma {gamma:.4g} ({solved.describe()})")
     if redesigned:
-        results = _recertify(envelope, results, gains, vertices, redesigned, jobs, tell, where)
+        results = _recertify(envelope, results, gains, vertices, redesigned, jobs, tell, where, scheduler)
     common = CommonCertificate(
         P=P,
         gamma=gamma,
@@ -458,6 +428,7 @@ def _recertify(
     jobs: int,
     tell: Say,
     where: dict[str, str],
+    scheduler: str | None = None,
 ) -> dict[str, DesignResult]:
     """Each re-designed point's own certificate (its gamma_e, gamma_z over its own polytope), in processes."""
     plants = {p.name: p.plant for p in envelope.points}
@@ -467,7 +438,7 @@ def _recertify(
             tell(f"  point '{name}' ({where[name]}) re-certified: gamma_e {cert[0]:.4g}, gamma_z {cert[1]:.4g}")
 
     tasks = [(n, (plants[n], gains[n], vertices[n])) for n in redesigned]
-    certs = _run_all(_certify_point, tasks, jobs, done)
+    certs = _run_all(_certify_point, tasks, jobs, done, scheduler)
     out = dict(results)
     for name, cert in certs.items():
         if cert is None:
