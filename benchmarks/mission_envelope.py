@@ -2,13 +2,14 @@
 
 Run by hand (a measurement, not a test; about a minute on 2 cores):
 
-    python benchmarks/mission_envelope.py [--mission docs/examples/mission-short.toml] [--speedup 20]
-        [--work DIR] [--low 90] [--high 100]
+    python benchmarks/mission_envelope.py [--id-mission docs/examples/mission-identification.toml]
+        [--mission docs/examples/mission-short.toml] [--schedule airspeed [--schedule bank_load_factor]]
+        [--model short-period] [--known-input throttle] [--aircraft c172p] [--speedup 20] [--seed 0] [--work DIR]
 
-1. flies an identification mission on ``sim-vehicle --aircraft c172p`` (its own autopilot; a PRBS leg at --high
-   knots, then one at --low knots, stick and throttle held through each), logged as a tlog;
-2. identifies a longitudinal plant from each leg (``fault-monitor identify --window``), assembles the two into an
-   envelope scheduled by airspeed (``fault-monitor envelope``) and designs it, and the --high plant alone;
+1. flies the identification mission on ``sim-vehicle --aircraft NAME`` (its own autopilot), logged as a tlog;
+2. identifies a plant from each of its legs (every segment with an ``excite`` key; ``fault-monitor identify
+   --window`` over the leg and two seconds of its lead-in), assembles them into an envelope scheduled by the
+   ``--schedule`` signals (``fault-monitor envelope``), designs it, and the first leg's plant alone;
 3. flies the mission (the vehicle's autopilot, no fault), logged as a tlog;
 4. analyses that log with the one-trim plant and with the envelope (``fault-monitor analyse --json``, the same
    vehicle table as ``run``) and prints per segment the largest |f_hat| of each, and the envelope's per-point
@@ -41,8 +42,9 @@ def _monitor(*args: str) -> subprocess.CompletedProcess:
     return done
 
 
-def log_flight(mission: Path, tlog: Path, speedup: float, seed: int) -> float:
-    """Fly ``mission`` on sim-vehicle c172p, logging every datagram as a MAVProxy-style tlog; the seconds taken."""
+def log_flight(mission: Path, tlog: Path, speedup: float, seed: int, aircraft: str = "c172p") -> float:
+    """Fly ``mission`` on sim-vehicle ``aircraft``, logging every datagram as a MAVProxy-style tlog; the seconds
+    taken."""
     from monitor.link.tlog import TlogWriter
 
     start = time.monotonic()
@@ -56,7 +58,7 @@ def log_flight(mission: Path, tlog: Path, speedup: float, seed: int) -> float:
                 "sim_vehicle",
                 "run",
                 "--aircraft",
-                "c172p",
+                aircraft,
                 "--mission",
                 str(mission),
                 "--mavlink",
@@ -136,6 +138,7 @@ def main() -> int:
     p.add_argument(
         "--known-input", action="append", default=[], help="identify's --known-input for every leg (e.g. throttle)"
     )
+    p.add_argument("--aircraft", default="c172p", help="the JSBSim aircraft both missions are flown on")
     p.add_argument("--speedup", type=float, default=20.0)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--work", help="keep the files here (default: a temporary directory)")
@@ -147,15 +150,16 @@ def main() -> int:
 
     # 1-2. identification legs, plants, the envelope and the designs
     id_log = work / "identification.tlog"
-    took = log_flight(id_mission, id_log, args.speedup, args.seed)
+    took = log_flight(id_mission, id_log, args.speedup, args.seed, args.aircraft)
     print(f"identification flight: {took:.1f} s", file=sys.stderr)
     plants: list[Path] = []
     for leg, a, b in legs(id_mission):
-        plants.append(work / f"c172p-{leg}.toml")
+        plants.append(work / f"{args.aircraft}-{leg}.toml")
         window = f"{a - 2:g}:{b:g}"
         known = [a for name in args.known_input for a in ("--known-input", name)]
         _monitor("identify", str(id_log), "--model", args.model, *known, "--out", str(plants[-1]), "--window", window)
-    env, env_gains, one_gains = work / "c172p-env.toml", work / "c172p-env-gains.toml", work / "c172p-one-gains.toml"
+    env, env_gains = work / f"{args.aircraft}-env.toml", work / f"{args.aircraft}-env-gains.toml"
+    one_gains = work / f"{args.aircraft}-one-gains.toml"
     _monitor("envelope", *map(str, plants), *(a for s in schedule for a in ("--schedule", s)), "--out", str(env))
     start = time.monotonic()
     _monitor("design", "--plant", str(env), "--out", str(env_gains), "--jobs", "2", "--quiet")
@@ -165,7 +169,7 @@ def main() -> int:
 
     # 3-4. the mission, and both models over its log
     flight = work / "mission.tlog"
-    took = log_flight(mission, flight, args.speedup, args.seed)
+    took = log_flight(mission, flight, args.speedup, args.seed, args.aircraft)
     print(f"mission flight: {took:.1f} s", file=sys.stderr)
     _one_report, one_rows = analyse(flight, one, one_gains, work / "one.rrd")
     env_report, scheduled = analyse(flight, env, env_gains, work / "env.rrd")

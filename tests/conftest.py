@@ -34,7 +34,15 @@ from tests.designs import CACHE_ENV  # noqa: E402 - it imports numpy, which must
 E2E = Path(__file__).resolve().parent / "e2e"
 # end-to-end modules whose verdicts do not hang on the wall-clock pace of a closed loop (a vehicle alone,
 # seeded draws, warnings, a log read back): they may share the CPU with another test, as unit tests do
-NOT_PACED = {"test_sim_vehicle", "test_router", "test_identify_flight", "test_link_peers", "test_sim_aircraft"}
+NOT_PACED = {
+    "test_sim_vehicle",
+    "test_router",
+    "test_identify_flight",
+    "test_link_peers",
+    "test_sim_aircraft",
+    "test_envelope_manoeuvres",  # a mission flown as fast as JSBSim goes, read back from its log
+    "test_design_cluster",  # a design on a Dask scheduler and worker: no loop, no pace
+}
 
 
 def _group(path: Path) -> str:
