@@ -221,8 +221,15 @@ class Autopilot:
         """
         if hold and self._held is None:
             self._held = (self.elevator_deg, self.throttle)
-        elif not hold:
+        elif not hold and self._held is not None:
+            # the leg is over: the airspeed it lost (or gained) is taken back at the reference's own rate, from
+            # where it is, as a pilot would (a reference left at the target would ask for it at once: c182 after
+            # 30 s in a held 60 deg turn was 16 kt slow, and its throttle sat at full against a step)
             self._held = None
+            self.airspeed_ref = fdm["velocities/vc-kts"]
+            # ... and the altitude it drifted to, back to the target at the altitude reference's rates
+            self.altitude_ref = fdm["position/h-sl-ft"]
+            self.climb_ref = 60.0 * fdm["velocities/h-dot-fps"]
         g, dt = self.gains, self.dt
         phi, theta, psi = fdm["attitude/phi-deg"], fdm["attitude/theta-deg"], fdm["attitude/psi-deg"]
         p = math.degrees(fdm["velocities/p-rad_sec"])
@@ -268,7 +275,8 @@ class Autopilot:
         speed_error = self.airspeed_ref - self._airspeed
         throttle = self.trim.throttle + g.speed * speed_error + self._throttle_i
         ramping = self.airspeed_ref != targets.airspeed_kt
-        if not ramping and (0.0 < throttle < 1.0 or (throttle >= 1.0) != (speed_error > 0)):
+        held = self._held is not None  # the integrators hold too: the loops are open (no wind-up to release)
+        if not ramping and not held and (0.0 < throttle < 1.0 or (throttle >= 1.0) != (speed_error > 0)):
             self._throttle_i += g.speed_i * speed_error * dt
         self.throttle = _clip(throttle if self._held is None else self._held[1] + throttle_excitation, 0.0, 1.0)
         for name in self.throttles:
@@ -285,7 +293,7 @@ class Autopilot:
         gamma = math.degrees(math.atan2(climb / 60.0, vt_fps))
         pitch_cmd = self.trim.theta_deg + gamma_cmd + g.climb * (gamma_cmd - gamma) + g.turn * (load_factor - 1.0)
         low, high = PITCH_LIMITS_DEG
-        if low < pitch_cmd < high or (pitch_cmd >= high) != (altitude_error > 0):
+        if not held and (low < pitch_cmd < high or (pitch_cmd >= high) != (altitude_error > 0)):
             self._altitude_i += g.altitude_i * altitude_error * dt
         self.pitch_cmd_deg = pitch_cmd = _clip(pitch_cmd, low, high)
         pitch_error = pitch_cmd - theta
@@ -293,17 +301,19 @@ class Autopilot:
         command = schedule * (g.pitch_rate * (q - q_turn) - g.pitch * pitch_error) - self._pitch_i
         elevator = self.trim.elevator_deg + self.half_travel * command
         # positive elevator pitches the nose down: a positive attitude error asks for less elevator
-        if self.low < elevator < self.high or (elevator <= self.low) != (pitch_error > 0):
+        if not held and (self.low < elevator < self.high or (elevator <= self.low) != (pitch_error > 0)):
             self._pitch_i += schedule * g.pitch_i * pitch_error * dt
         if self._held is not None:
             elevator = self._held[0]
         self.elevator_deg = _clip(elevator + excitation_deg, self.low, self.high)
 
-        self._watch(fdm["aero/alpha-deg"], airspeed, targets, ramping)
+        self._watch(fdm["aero/alpha-deg"], airspeed, targets, ramping or self._held is not None)
         return self.elevator_deg
 
     def _watch(self, alpha: float, airspeed: float, targets: Targets, ramping: bool) -> None:
-        """Note a stall, or a throttle on a stop with the airspeed still off, once they have lasted."""
+        """Note a stall, or a throttle on a stop with the airspeed still off, once they have lasted. ``ramping``:
+        the airspeed is not the throttle's to hold now (its reference moves, or an identification leg holds the
+        throttle where it was), so an airspeed off the reference is no failure."""
         if self.trouble is not None:
             return
         self._stalled_s = self._stalled_s + self.dt if alpha > self.stall_alpha_deg else 0.0
