@@ -60,18 +60,16 @@ def test_the_envelope_switches_to_the_slow_point_and_reads_the_slow_down_closer_
     assert env_max < one_max
 
 
-def test_run_schedules_the_envelope_and_says_which_point_on_zenoh_and_in_the_recording(tmp_path: Path) -> None:
-    """``fault-monitor run --observe`` with the envelope, the vehicle flying the mission: the ready line names the
-    envelope and its points, every estimate names its point, the recording keeps it, the summary counts none
-    outside."""
-    from monitor.service.recording_reader import load_recording
+def observe_live(tmp_path: Path, envelope: Path, gains: Path) -> tuple[str, list[dict], Path]:
+    """``fault-monitor run --observe`` with ``envelope`` while the vehicle flies the short mission at 100x: the
+    monitor's log, the estimates it published on Zenoh and its recording."""
     from tests.daemons import free_udp_port
-    from tests.monitor_bus import processed_count, wait_ready, zenoh_bus
+    from tests.monitor_bus import wait_ready, zenoh_bus
 
     port, rrd = free_udp_port(), tmp_path / "run.rrd"
     with zenoh_bus() as bus:
         estimates = bus.collect("uav/*/fault/estimate")
-        args = ["run", "--observe", "--plant", str(ENVELOPE), "--gains", str(ENVELOPE_GAINS)]
+        args = ["run", "--observe", "--plant", str(envelope), "--gains", str(gains)]
         args += ["--mavlink", f"udpin:127.0.0.1:{port}", "--rrd", str(rrd), "--no-truth", "--no-gcs-feedback"]
         args += ["--zenoh-mode", "client", "--zenoh-connect", bus.endpoint, "--name", "envelope"]
         with Daemon("monitor", args, tmp_path / "monitor.log") as monitor:
@@ -82,6 +80,17 @@ def test_run_schedules_the_envelope_and_says_which_point_on_zenoh_and_in_the_rec
             time.sleep(1.0)  # the last estimates through Zenoh
             assert monitor.stop() == 0
             log = monitor.log()
+    return log, list(estimates), rrd
+
+
+def test_run_schedules_the_envelope_and_says_which_point_on_zenoh_and_in_the_recording(tmp_path: Path) -> None:
+    """``fault-monitor run --observe`` with the envelope, the vehicle flying the mission: the ready line names the
+    envelope and its points, every estimate names its point, the recording keeps it, the summary counts none
+    outside."""
+    from monitor.service.recording_reader import load_recording
+    from tests.monitor_bus import processed_count
+
+    log, estimates, rrd = observe_live(tmp_path, ENVELOPE, ENVELOPE_GAINS)
     assert (
         "envelope c172p-env scheduled by airspeed: c172p-90kt (airspeed 46.2258 m/s), c172p-100kt (airspeed "
         "51.4446 m/s)" in log.split("ready:")[1].splitlines()[0]
@@ -94,3 +103,21 @@ def test_run_schedules_the_envelope_and_says_which_point_on_zenoh_and_in_the_rec
     assert recording.envelope_points == ["c172p-90kt", "c172p-100kt"]
     samples = recording.vehicles[1].samples
     assert len(samples) == processed and {s.point for s in samples} == {0, 1} and all(s.inside for s in samples)
+
+
+def test_run_observes_a_turn_with_the_turn_envelope_live_without_an_alarm(tmp_path: Path) -> None:
+    """The same flight live with the five-point turn envelope (scheduled on the airspeed and the bank's load
+    factor, the throttle a known input): the monitor needs the roll and the throttle in every sample as it needs
+    the outputs, takes the 45 deg turn's point in the turn and the cruise point level, raises no alarm."""
+    from tests.monitor_bus import processed_count
+
+    envelope, gains = DATA / "c172p-envelope-turns.toml", DATA / "c172p-envelope-turns-gains.toml"
+    log, estimates, _rrd = observe_live(tmp_path, envelope, gains)
+    ready = log.split("ready:")[1].splitlines()[0]
+    assert "envelope c172p-env scheduled by airspeed, bank_load_factor: " in ready
+    assert processed_count(log) >= 1400 and "outside envelope 0" in log
+    assert estimates and all(e["in_envelope"] is True and e["alarm"] is False for e in estimates)
+    assert {"c172p-id-100", "c172p-id-45"} <= {e["point"] for e in estimates}
+    fhat = np.array([e["f_hat"][0] for e in estimates])
+    print(f"max |f_hat| live: {np.abs(fhat).max():.3f} deg over {len(fhat)} estimates")
+    assert np.abs(fhat).max() < 0.6
