@@ -53,6 +53,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", metavar="GAINS.toml", help="write the gains designed at the margin")
     parser.add_argument("--png", metavar="FILE", help="plot gamma_e against tau_max")
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=None,
+        metavar="N",
+        help="envelope plant: search the points' margins on a local Dask cluster of N processes (default: the CPU "
+        "count)",
+    )
+    parser.add_argument(
+        "--scheduler", metavar="ADDRESS", help="envelope plant: search them on the Dask cluster at ADDRESS instead"
+    )
     parser.set_defaults(func=run)
 
 
@@ -60,8 +71,13 @@ def run(args: argparse.Namespace) -> int:
     from monitor.checks.margin import delay_margin
     from monitor.errors import UserError
     from monitor.gains import write_gains
+    from monitor.model.envelope import is_envelope
     from monitor.model.plant import load_plant
 
+    if is_envelope(args.plant):
+        return _run_envelope(args)
+    if args.jobs is not None or args.scheduler is not None:
+        raise UserError("--jobs and --scheduler are for an envelope plant's points; a single plant is one search")
     plant = load_plant(args.plant)
     if args.tolerance is not None and not 0 < args.tolerance < plant.h:
         raise UserError(f"--tolerance must be in (0, h = {plant.h}), got {args.tolerance}")
@@ -121,6 +137,60 @@ def run(args: argparse.Namespace) -> int:
                 f"wrote gains at the margin to {args.out} (designed for tau in [{plant.tau_min}, {margin.tau_max:.4f}])"
             )
     return 0
+
+
+def _run_envelope(args: argparse.Namespace) -> int:
+    """Every point's margin (in parallel), the worst, and whether the common certificate holds there."""
+    import os
+
+    from monitor.checks.envelope_margin import envelope_margin
+    from monitor.errors import UserError
+    from monitor.gains import write_envelope_gains
+    from monitor.model.envelope import load_envelope
+
+    envelope = load_envelope(args.plant)
+    if args.tolerance is not None and not 0 < args.tolerance < envelope.h:
+        raise UserError(f"--tolerance must be in (0, h = {envelope.h}), got {args.tolerance}")
+    for option in ("up_to", "png"):
+        if getattr(args, option) is not None:
+            raise UserError(f"--{option.replace('_', '-')} is not available for an envelope plant yet")
+    jobs = args.jobs if args.jobs is not None else (os.cpu_count() or 1)
+    if jobs < 1:
+        raise UserError(f"--jobs must be >= 1, got {jobs}")
+    say = lambda text: print(text, file=sys.stderr, flush=True)  # noqa: E731
+    say(f"envelope '{envelope.name}': each point's delay margin ({args.objective} design at each probe)")
+    result = envelope_margin(
+        envelope, tolerance=args.tolerance, objective=args.objective, jobs=jobs, scheduler=args.scheduler, say=say
+    )
+    if args.out and result.design is not None:
+        write_envelope_gains(args.out, result.design)
+    doc = {
+        "points": [{"name": name, **vars(m)} for name, m in result.points.items()],
+        "worst": result.worst,
+        "tau_max": result.tau_max,
+        "common_certificate": result.common,
+        "gamma_common": result.design.common.gamma if result.design is not None else None,
+        "why_not": result.why_not or None,
+        "h": envelope.h,
+        "plant_interval": [envelope.tau_min, envelope.tau_max],
+    }
+    if args.json:
+        print(json.dumps(doc))
+        return 0 if result.common else 1
+    for name, m in result.points.items():
+        print(f"point {name}: delay margin tau_max = {m.tau_max:.4f} s (gamma_e {m.gamma_e:.4f} there)")
+    verdict = (
+        f"one certificate covers every point with tau up to it (gamma {result.design.common.gamma:.4g})"
+        if result.design is not None
+        else f"NO common certificate there: {result.why_not}"
+    )
+    print(
+        f"envelope: worst point {result.worst}: tau_max = {result.tau_max:.4f} s ({result.tau_max / envelope.h:.1%} "
+        f"of h = {envelope.h} s; the plant file says {envelope.tau_max}); {verdict}"
+    )
+    if args.out:
+        print(f"wrote the envelope's gains at the margin to {args.out}" if result.design else "wrote nothing")
+    return 0 if result.common else 1
 
 
 def _plot(margin, path: str, plant) -> None:
