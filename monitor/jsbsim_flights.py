@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from monitor.checks.calibration import calibrate_threshold
 from monitor.checks.detectability import Detectability, upcrossing_rate
 from monitor.errors import UserError
 from monitor.model.plant import Plant
@@ -156,6 +157,10 @@ class MonteCarlo:
     smallest_bias_95: float  # the empirical 95th percentile of it (what detects in 95 % of the flights)
     disturbance: dict | None  # sigma and time constant of d measured in the flights (equation error)
     seconds: float
+    # the threshold calibrated from the flights' crossings (monitor.checks.calibration; None: too few to fit), and
+    # the false alarms the flights had at it
+    calibration: dict | None = None
+    false_alarms_at_calibrated: int | None = None
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -254,6 +259,20 @@ def monte_carlo(
             + f" within {prediction.within_s:g} s; smallest detected {smallest[-1]:.3g}"
         )
     hours = flights * (onset - warm) * h / 3600.0
+    calibration = calibrate_threshold(fh_all, h, prediction.false_alarms_per_hour, prediction.threshold)
+    at_calibrated = None
+    if calibration is not None:  # the alarm's own logic over the same pre-fault estimates, at the calibrated level
+        at_calibrated = sum(
+            _raises(
+                f,
+                AlarmConfig(
+                    calibration.threshold,
+                    prediction.clear * calibration.threshold / prediction.threshold,
+                    prediction.alarm_samples,
+                ),
+            )
+            for f in fh_all
+        )
     v0 = float(np.mean(np.concatenate(fh_all) ** 2))
     v1 = float(np.mean(np.concatenate([f[:-1] * f[1:] for f in fh_all])))
     std, rho = prediction.fhat_std, prediction.fhat_rho
@@ -290,7 +309,17 @@ def monte_carlo(
         smallest_bias_95=float(np.quantile(smallest, 0.95, method="higher")),
         disturbance=measured,
         seconds=time.perf_counter() - started,
+        calibration=calibration.as_dict() if calibration is not None else None,
+        false_alarms_at_calibrated=at_calibrated,
     )
+
+
+def _raises(f_hat: np.ndarray, config) -> int:
+    """How many times the alarm (``monitor.service.alarm``) raises over one series of |f_hat|."""
+    from monitor.service.alarm import Alarm
+
+    alarm = Alarm(config)
+    return sum(alarm.update(abs(float(v))) == "raised" for v in f_hat)
 
 
 def _flight_disturbance(plant: Plant, signals, loop: ClosedLoop, first: int, last: int) -> dict | None:

@@ -50,3 +50,9 @@ def test_the_predicted_noise_and_smallest_bias_are_within_a_stated_factor_of_jsb
     assert 0.5 <= flown["ratio_bias"] <= 1.1, flown
     assert flown["detected_within"] == flown["flights"] == 2, flown
     assert max(flown["detection_times_s"]) <= report["within_s"], flown
+    # the threshold calibrated from these flights' crossings: never below the prediction's, fitted on levels the
+    # flights crossed, and the alarm raises no more often at it than at the prediction's
+    cal = flown["calibration"]
+    assert cal is not None and cal["threshold"] >= report["threshold"] - 1e-12
+    assert cal["gaussian_threshold"] == report["threshold"] and len(cal["levels"]) >= 3
+    assert flown["false_alarms_at_calibrated"] <= flown["false_alarms"]

@@ -299,6 +299,20 @@ def _print(plant, r, mc, args) -> None:
         f"  false alarms {mc.false_alarms} in {mc.hours:.2f} h = {mc.false_alarms_per_hour:.3g} per hour observed, "
         f"at most {mc.predicted_per_hour:.3g} predicted"
     )
+    cal = mc.calibration
+    if cal is None:
+        print("  calibrated   - (the flights cross too few levels often enough to fit their tail: fly more)")
+    else:
+        other = cal["other_fit_per_hour"]
+        print(
+            f"  calibrated   threshold {cal['threshold']:.4g} {u} for {cal['per_hour']:g} per hour (kept: "
+            f"{cal['kept']}; the flights' crossings of {len(cal['levels'])} levels up to {max(cal['levels']):.3g} "
+            f"{u} fitted and extrapolated); the predicted {cal['gaussian_threshold']:.4g} gives "
+            f"{cal['prediction_per_hour_by_flights']:.3g} per hour by them"
+            + (f"; conservative: the other fit gives {other:.3g} per hour at it" if other is not None else "")
+            + f"; {mc.false_alarms_at_calibrated} false alarms at it in the flights"
+        )
+        print(f"  use          --alarm-threshold {cal['threshold']:.4g} on run and analyse in this air")
     times = [t for t in mc.detection_times_s if t is not None]
     spread = f" (after {min(times):.2f} .. {max(times):.2f} s)" if times else ""
     print(
