@@ -372,9 +372,7 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
                 f"--known-input {name}: it does not move over the log (spread {moved:g}): its effect cannot be "
                 "identified (a mission leg with excite_throttle moves the throttle)"
             )
-    units = tuple(
-        str(written["measured"][s].get("unit", "")) if isinstance(written["measured"][s], dict) else "" for s in states
-    )
+    units = tuple(smap.measured[s].unit for s in states)  # the parsed map's: a derived signal's default unit too
     if kept is not None:
         return _measure_air(req, kept, k, X, U, states, sysid)
     if flight.records >= _LONG_LOG_RECORDS:
