@@ -237,6 +237,30 @@ print(sent)
 """
 
 
+def overload(plant: Path, gains: Path, workdir: Path, seconds: float, fleets: list[int]) -> None:
+    """Past saturation, the echo and the monitor in the same run (paired): answered, answered within one sample
+    period (per second and in all), round trip p50/p99 of the answers. One message per datagram, as routers send."""
+    print(f"  overload, one message per datagram, {seconds:.0f} s each, echo and monitor paired on this machine:")
+    for vehicles in fleets:
+        for kind in ("echo", "monitor"):
+            port = _free_udp_port()
+            log_path = workdir / f"{kind}-{vehicles}.log"
+            proc = start_server(kind, port, plant, gains, str(log_path))
+            try:
+                rtts, sent, answered = drive(port, vehicles, seconds, "one message per datagram")
+            finally:
+                stop_server(proc)
+            in_time = sum(1 for r in rtts if r <= H)
+            print(
+                f"  {vehicles:3d} x 50 Hz {kind:8s}: answered {answered / sent:6.1%} ({answered / seconds:6.0f}/s), "
+                f"within {H * 1e3:.0f} ms {in_time / seconds:6.0f}/s ({in_time / sent:6.1%}), "
+                f"round trip p50 {pct(rtts, 50) / 1e3:6.1f} ms p99 {pct(rtts, 99) / 1e3:6.1f} ms"
+            )
+        summary = [line for line in log_path.read_text().splitlines() if "stopped:" in line]
+        if summary:
+            print("      monitor summary:", summary[-1].split("stopped: ", 1)[1])
+
+
 def pct(values: list[float], p: float) -> float:
     values = sorted(values)
     return values[min(len(values) - 1, int(p / 100 * len(values)))] * 1e6 if values else float("nan")
@@ -299,10 +323,20 @@ def main() -> None:
         action="store_true",
         help="only: one monitor serves 10 vehicles, then at once 100 (ids 1-10 again, from new ports)",
     )
+    parser.add_argument(
+        "--overload",
+        type=int,
+        nargs="*",
+        metavar="VEHICLES",
+        help="only: echo and monitor past saturation, paired (default fleets: 100 200)",
+    )
     args = parser.parse_args()
     os.environ.setdefault("RERUN_ANALYTICS", "0")
     workdir = Path(tempfile.mkdtemp(prefix="bench-monitor-"))
     plant, gains = bench_plant(workdir)
+    if args.overload is not None:
+        overload(plant, gains, workdir, args.seconds, args.overload or [100, 200])
+        return
     if args.flood:
         port = _free_udp_port()
         proc = start_server("monitor", port, plant, gains, str(workdir / "monitor.log"))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import socket
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -185,7 +186,7 @@ def test_a_mavlink1_peer_is_answered_in_mavlink1_and_a_signed_link_refuses_it(tm
     link = open_link(
         parse_connection("udpin:127.0.0.1:0"),
         0,
-        pipeline.on_frames,
+        pipeline.on_reads,
         pipeline.frames,
         Signer(bytes(range(32))) if signed else None,
     )
@@ -194,7 +195,7 @@ def test_a_mavlink1_peer_is_answered_in_mavlink1_and_a_signed_link_refuses_it(tm
     old_peer, new_peer = ("127.0.0.1", 40001), ("127.0.0.1", 40002)
     codec = v1.MAVLink(None, srcSystem=3, srcComponent=1)
     for k in range(3):
-        link.on_datagram(_v1_sample(codec, v1, k), old_peer, 0)
+        link.on_datagram(_v1_sample(codec, v1, k), old_peer, time.perf_counter_ns())
     if signed:
         assert sent == [] and pipeline.frames.v1_refused == 6 and pipeline.frames.frames == 0
         with caplog.at_level(logging.WARNING, logger="monitor.run"):
@@ -217,6 +218,6 @@ def test_a_mavlink1_peer_is_answered_in_mavlink1_and_a_signed_link_refuses_it(tm
     v2.send(mavlink.MAVLink_attitude_message(3000, 0.0, 0.01, 0.0, 0.0, 0.0, 0.0))
     v2.send(mavlink.MAVLink_servo_output_raw_message(3_000_000, 0, 1500, 1500, 1500, 0, 0, 0, 0, 0))
     pipeline.table.restart_silence = 0.0  # let the new port take over at once
-    link.on_datagram(v2.file.take(), new_peer, 0)
+    link.on_datagram(v2.file.take(), new_peer, time.perf_counter_ns())
     assert sent and all(data[0] == 0xFD for data, _peer in sent)
     assert not link.speaks_v1(new_peer) and link.speaks_v1(old_peer)

@@ -7,8 +7,15 @@
 * ``tcpin:HOST:PORT`` listen for TCP connections; every connection is a peer.
 
 Each link turns bytes into frames with its own ``FrameParser`` (one per TCP connection, since a stream
-keeps partial frames; one per UDP link, since a datagram never does) and hands ``(route, frames, t0)`` to
-the pipeline, where ``route = (link, peer)`` is where the answer goes. Nothing here knows the plant.
+keeps partial frames; one per UDP link, since a datagram never does) and hands the pipeline a list of reads
+``(route, frames, t0)``, where ``route = (link, peer)`` is where the answer goes and ``t0`` (``perf_counter_ns``)
+when the bytes arrived. Nothing here knows the plant.
+
+Why a list: a UDP link drains everything its socket holds per wake-up of the event loop (bounded) and hands it
+over in one call, so that the pipeline sees every vehicle's newest sample at once and can answer that one
+instead of the queue behind it (``monitor.service.pipeline``, "Current, not queued"). ``t0`` is the kernel's
+receive time (``SO_TIMESTAMPNS``) where the platform has it, so the time a datagram waited in the socket's
+buffer counts in its age; elsewhere it is the time it was read.
 
 Which MAVLink version a peer gets: the one it speaks. A peer whose last read held MAVLink 1 frames (a telemetry
 radio, older firmware, ArduPilot's ``SERIALn_PROTOCOL = 1``) is answered with MAVLink 1 frames from the link's
@@ -26,6 +33,8 @@ import errno
 import ipaddress
 import logging
 import socket
+import struct
+import sys
 import time
 from collections import OrderedDict
 from collections.abc import Callable
@@ -37,13 +46,17 @@ from monitor.link.frames import FrameCounters, FrameEncoder, FrameParser, RawFra
 from monitor.link.outgoing import MONITOR_COMPONENT, MONITOR_SYSID, heartbeat_frame
 from monitor.link.signing import Signer
 
-__all__ = ["ConnectionSpec", "parse_connection", "Link", "open_link", "FrameHandler"]
+__all__ = ["ConnectionSpec", "parse_connection", "Link", "open_link", "FrameHandler", "Read"]
 
 log = logging.getLogger(__name__)
 
 KINDS = ("udpin", "udpout", "tcp", "tcpin")
 _ALIASES = {"udp": "udpin"}  # mavutil's spelling
-FrameHandler = Callable[[tuple, list[RawFrame], int], None]
+Read = tuple[tuple, list[RawFrame], int]  # (route, frames, t0 in perf_counter_ns)
+FrameHandler = Callable[[list[Read]], None]
+# SO_TIMESTAMPNS (Linux: 35, which Python's socket module does not name): each datagram's kernel receive time
+_SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35 if sys.platform.startswith("linux") else None)
+_TIMESPEC = struct.Struct("@qq")  # struct timespec on a 64-bit Linux: tv_sec, tv_nsec
 
 
 @dataclass(frozen=True)
@@ -101,17 +114,18 @@ def is_loopback(host: str) -> bool:
 _errors_logged: set[str] = set()
 
 
-def _guarded(handler: FrameHandler, route: tuple, frames: list[RawFrame], t0: int) -> None:
-    """A bug in handling one read costs a log line (the first of its kind with its traceback), never the loop."""
+def _guarded(handler: FrameHandler, reads: list[Read]) -> None:
+    """A bug in handling reads costs a log line (the first of its kind with its traceback), never the loop."""
     try:
-        handler(route, frames, t0)
+        handler(reads)
     except Exception as exc:
         kind = type(exc).__name__
+        where = reads[0][0][1] if len(reads) == 1 else f"{len(reads)} reads"
         if kind not in _errors_logged:
             _errors_logged.add(kind)
-            log.exception("error handling frames from %s (further %s errors logged at DEBUG)", route[1], kind)
+            log.exception("error handling frames from %s (further %s errors logged at DEBUG)", where, kind)
         else:
-            log.debug("error handling frames from %s: %s", route[1], exc)
+            log.debug("error handling frames from %s: %s", where, exc)
 
 
 class Link:
@@ -172,11 +186,12 @@ class UdpLink(Link):
 
     Why a raw non-blocking socket with ``loop.add_reader`` instead of an asyncio datagram transport: the
     transport reads one datagram per pass of the event loop, so a burst of one-message-per-datagram
-    traffic (a router forwarding ten vehicles) pays a full loop pass per message. The reader drains up to
-    ``burst`` datagrams per wake-up (bounded, so timers and other links still run), then yields.
+    traffic (a router forwarding ten vehicles) pays a full loop pass per message. The reader drains the socket
+    until it is empty, up to ``burst`` datagrams per wake-up (bounded, so timers and other links still run),
+    and hands them to the pipeline in one call.
     """
 
-    burst = 64
+    burst = 1024
     datagram = True
 
     def __init__(self, *args, max_peers: int = 1024, peer_timeout: float = 30.0, **kwargs) -> None:
@@ -189,6 +204,7 @@ class UdpLink(Link):
         self.peers_evicted = 0
         self._v1_peers: set[object] = set()  # peers whose last datagram held MAVLink 1 frames
         self.remote: tuple | None = None
+        self.stamped = False  # whether the kernel stamps each datagram's arrival (SO_TIMESTAMPNS)
         self._loop: asyncio.AbstractEventLoop | None = None
 
     async def start(self) -> None:
@@ -209,29 +225,56 @@ class UdpLink(Link):
             hint = " (is another monitor or MAVProxy using this port?)" if exc.errno == errno.EADDRINUSE else ""
             raise UserError(f"--mavlink {self.spec}: {exc.strerror or exc}{hint}") from None
         sock.setblocking(False)
+        if _SO_TIMESTAMPNS is not None:
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
+                self.stamped = True
+            except OSError:  # not this platform's option: the read time stands in for the arrival
+                pass
         self.sock = sock
         name = sock.getsockname()
         self.local = format_connection("udpin", name[0], name[1]) if self.spec.kind == "udpin" else str(self.spec)
         self._loop.add_reader(sock.fileno(), self._readable)
 
     def _readable(self) -> None:
+        """Drain the socket (up to ``burst`` datagrams) and hand every read to the pipeline at once."""
         sock = self.sock
         if sock is None:
             return
+        reads: list[Read] = []
+        clock = time.perf_counter_ns
+        stamped = self.stamped
+        # the kernel stamps with the wall clock: this offset turns a stamp into perf_counter_ns
+        offset = clock() - time.time_ns() if stamped else 0
         for _ in range(self.burst):
             try:
-                data, addr = sock.recvfrom(65535)
+                if stamped:
+                    data, ancillary, _flags, addr = sock.recvmsg(65535, 64)
+                    t0 = _arrival(ancillary, offset) if ancillary else clock()
+                else:
+                    data, addr = sock.recvfrom(65535)
+                    t0 = clock()
             except (BlockingIOError, InterruptedError):
-                return
+                break
             except OSError as exc:  # e.g. ICMP port unreachable reported on a connected socket
                 log.debug("%s: %s", self.spec, exc)
-                return
-            self.on_datagram(data, addr, time.perf_counter_ns())
+                break
+            read = self._read(data, addr, t0)
+            if read is not None:
+                reads.append(read)
+        if reads:
+            _guarded(self.handler, reads)
 
     def on_datagram(self, data: bytes, addr, t0: int) -> None:
+        """One datagram, handled at once (the drain hands many over in one call)."""
+        read = self._read(data, addr, t0)
+        if read is not None:
+            _guarded(self.handler, [read])
+
+    def _read(self, data: bytes, addr, t0: int) -> Read | None:
         frames = self.parser.feed(data)
         if not frames:  # junk costs no bookkeeping, and its source gets no heartbeat (no reflection)
-            return
+            return None
         peers = self._peers
         if addr in peers:
             peers.move_to_end(addr)
@@ -243,7 +286,7 @@ class UdpLink(Link):
             self._v1_peers.add(addr)
         elif self._v1_peers:
             self._v1_peers.discard(addr)
-        _guarded(self.handler, (self, addr), frames, t0)
+        return (self, addr), frames, t0
 
     def speaks_v1(self, peer: object) -> bool:
         return peer in self._v1_peers
@@ -313,7 +356,7 @@ class _Connection(asyncio.Protocol):
 
     def _process(self, frames: list[RawFrame], t0: int) -> None:
         now_frames, rest = frames[: self.per_pass], frames[self.per_pass :]
-        _guarded(self.link.handler, (self.link, self), now_frames, t0)
+        _guarded(self.link.handler, [((self.link, self), now_frames, t0)])
         if rest:
             self._backlog = rest
             asyncio.get_running_loop().call_soon(self._drain)
@@ -395,6 +438,15 @@ class TcpLink(Link):
         for conn in list(self.connections):
             if conn.transport is not None:
                 conn.transport.close()
+
+
+def _arrival(ancillary: list[tuple[int, int, bytes]], offset: int) -> int:
+    """The kernel's receive stamp (``SCM_TIMESTAMPNS``, wall clock) as ``perf_counter_ns``."""
+    for _level, _kind, payload in ancillary:
+        if len(payload) >= _TIMESPEC.size:
+            sec, nsec = _TIMESPEC.unpack_from(payload)
+            return sec * 1_000_000_000 + nsec + offset
+    return time.perf_counter_ns()
 
 
 def open_link(

@@ -1,10 +1,15 @@
 """The monitor daemon: opens the links, Zenoh and the recorder around one ``Pipeline`` and one asyncio loop.
 
-The hot path is synchronous inside the links' read callbacks (``Pipeline.on_frames``). Beside it the loop
-runs two timers: every ``poll_s`` (5 ms) samples whose bounded wait for an actuator report ran out are
-processed, and once a second the housekeeping: heartbeats on every link, vehicle expiry, the WARNING
-for a vehicle whose telemetry never becomes a sample, and the one WARNING when a signed link refuses
-MAVLink 1 frames.
+The hot path is synchronous inside the links' read callbacks (``Pipeline.on_reads``: a link drains its socket
+and hands every read over at once; the pipeline answers each vehicle's newest sample within a round's budget and,
+when samples are left, the loop calls it again at once, after the links had their turn). Beside it the loop runs
+two timers: while vehicles are known, every ``poll_s`` (5 ms) samples whose bounded wait for an actuator report
+ran out are processed, and once a second the housekeeping: heartbeats on every link, vehicle expiry, the WARNING
+for a vehicle whose telemetry never becomes a sample, the end of an overload episode, and the one WARNING when a
+signed link refuses MAVLink 1 frames.
+
+Why nothing else wakes: an idle monitor (no vehicle) runs the 1 Hz housekeeping only, and the Zenoh and recorder
+threads sleep until there is something to write (``benchmarks/bench_idle.py``: under 1 % of a core).
 
 Shutdown (SIGINT/SIGTERM): stop reading, log the summary, drain the Zenoh queue (bounded), close the
 recorder (which flushes and writes the footer; live viewers get a bounded wait), undeclare everything and close the
@@ -135,6 +140,64 @@ def _live_urls(config: MonitorConfig) -> list[str]:
     return urls
 
 
+class _Timers:
+    """The loop's timed work, all of it event-driven: the next round when one was left over, the assembler's poll
+    while vehicles are known, and the 1 Hz housekeeping."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, config: MonitorConfig, pipeline: Pipeline, links: list[Link]):
+        self.loop = loop
+        self.config = config
+        self.pipeline = pipeline
+        self.links = links
+        self._round: asyncio.Handle | None = None
+        self._poll: asyncio.TimerHandle | None = None
+        self._housekeeping: asyncio.TimerHandle | None = None
+
+    def on_reads(self, reads) -> None:
+        """A link's reads: answered at once; what the round's budget left is answered in the next pass of the loop
+        (after the links were drained again: a newer sample of the same vehicle replaces the older one)."""
+        self.pipeline.on_reads(reads)
+        self._after_round()
+
+    def _next_round(self) -> None:
+        self._round = None
+        self.pipeline.answer()
+        self._after_round()
+
+    def _after_round(self) -> None:
+        if self._round is None and self.pipeline.pending():
+            self._round = self.loop.call_soon(self._next_round)
+        if self._poll is None and self.pipeline.table.vehicles:
+            self._poll = self.loop.call_later(self.config.poll_s, self._polling)
+
+    def _polling(self) -> None:
+        """Samples whose wait for an actuator report ran out; ticks only while vehicles are known."""
+        self.pipeline.poll(time.monotonic())
+        self._poll = self.loop.call_later(self.config.poll_s, self._polling) if self.pipeline.table.vehicles else None
+
+    def start(self) -> None:
+        for link in self.links:
+            link.heartbeat()
+        self._housekeeping = self.loop.call_later(1.0, self._housekeep)
+
+    def _housekeep(self) -> None:
+        now = time.monotonic()
+        pipeline = self.pipeline
+        for link in self.links:
+            link.heartbeat()
+        pipeline.table.expire(now)
+        pipeline.table.warn_missing(now)
+        pipeline.warn_frames()
+        pipeline.check_overload()
+        _check_recorder(pipeline)
+        self._housekeeping = self.loop.call_later(1.0, self._housekeep)
+
+    def cancel(self) -> None:
+        for handle in (self._round, self._poll, self._housekeeping):
+            if handle is not None:
+                handle.cancel()
+
+
 async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
@@ -142,9 +205,10 @@ async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
         loop.add_signal_handler(sig, stop.set)
     signer = Signer(config.signing_key) if config.signing_key is not None else None
     links: list[Link] = []
+    timers = _Timers(loop, config, pipeline, links)
     try:
         for i, spec in enumerate(config.connections):
-            link = open_link(spec, i, pipeline.on_frames, pipeline.frames, signer)
+            link = open_link(spec, i, timers.on_reads, pipeline.frames, signer)
             await link.start()
             links.append(link)
         mode = "compensation only" if config.compensate else "observe-only" if config.observe else "closed loop"
@@ -158,22 +222,10 @@ async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
             _recording_outputs(config),
             _operating_points(config),
         )
-        for link in links:
-            link.heartbeat()
-        next_housekeeping = time.monotonic() + 1.0
-        while not stop.is_set():
-            await asyncio.sleep(config.poll_s)  # a plain sleep: cheaper than a wait_for task every few ms
-            now = time.monotonic()
-            pipeline.poll(now)
-            if now >= next_housekeeping:
-                next_housekeeping = now + 1.0
-                for link in links:
-                    link.heartbeat()
-                pipeline.table.expire(now)
-                pipeline.table.warn_missing(now)
-                pipeline.warn_frames()
-                _check_recorder(pipeline)
+        timers.start()
+        await stop.wait()
     finally:
+        timers.cancel()
         for link in links:
             link.close()
         for sig in (signal.SIGINT, signal.SIGTERM):

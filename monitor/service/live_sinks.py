@@ -172,7 +172,7 @@ class LiveSink(StreamWriter):
 
     def close(self) -> None:
         """Ask the thread to send what is left and disconnect; ``join`` waits for it (bounded)."""
-        self._stop.set()
+        self.stop()
 
     def join(self, timeout_s: float) -> None:
         self._thread.join(timeout_s)
@@ -187,13 +187,17 @@ class LiveSink(StreamWriter):
 
     def _run(self) -> None:
         next_probe = 0.0
-        while not self._stop.wait(self.poll_s):
+        timeout = 0.0
+        while not self._sleep(timeout):
             now = time.monotonic()
             if now >= next_probe:
                 next_probe = now + self.probe_s
                 self._probe()
             if self._rec is not None and self._due():
                 self._drain()
+            # records to send: check every poll_s; else sleep until one comes or the next probe is due
+            busy = self._rec is not None and self._pending
+            timeout = self.poll_s if busy else max(0.0, next_probe - time.monotonic())
         self._finish()
 
     def _probe(self) -> None:

@@ -27,11 +27,14 @@ from __future__ import annotations
 import logging
 import time
 from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass, fields
+from typing import Any
 
 from monitor.link.dialect import MessageLayout, layout_by_name, mavlink
 from monitor.link.frames import FrameCounters, RawFrame
 from monitor.link.outgoing import alarm_text_frame, command_frame, fhat_frames
+from monitor.link.transports import Read
 from monitor.service.records import SampleRecord
 from monitor.service.vehicles import Processed, Vehicle, VehicleTable
 
@@ -41,6 +44,12 @@ log = logging.getLogger("monitor.run")
 
 _HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
 MAX_FRAMES_PER_DATAGRAM = 32  # a 64 KB datagram can pack ~800 frames: the rest is counted, not processed
+ROUND_S = 0.004  # answering budget of one round: the links are drained again after it (newer samples supersede)
+
+
+def _priority(entry: tuple[Vehicle, Any, int]) -> tuple[int, int]:
+    """Who is answered first in a round: the vehicle shed most in a row, then the oldest sample (bounded runs)."""
+    return -entry[0].shed_run, entry[2]
 
 
 def percentile(values, p: float) -> float | None:
@@ -83,6 +92,12 @@ class Pipeline:
         self.commands_sent = 0
         self.feedback_sent = 0
         self.warned_v1 = False
+        self.round_ns = int(ROUND_S * 1e9)
+        self.overloaded = False  # in an overload episode (shedding; one WARNING at its start)
+        self._newest: dict[int, tuple[Vehicle, Any, int]] = {}  # per vehicle: its newest sample not yet answered
+        self._shed_round: dict[int, int] = {}  # samples shed since the last round ended, per vehicle
+        self._shed_checked = 0
+        self._flush = getattr(publisher, "flush", None)  # once per round: the Zenoh puts of the round
         self._wanted: dict[int, tuple[str, MessageLayout]] = {}
         self.scheduled = any(m.envelope is not None for m in table.fleet.models())
         for model in table.fleet.models():
@@ -100,12 +115,100 @@ class Pipeline:
         now: float | None = None,
         wall: float | None = None,
     ) -> None:
-        """Frames of one read. On a datagram link at most one sample per vehicle is processed per datagram
-        and at most ``MAX_FRAMES_PER_DATAGRAM`` frames are looked at: one packet must not buy many answers."""
+        """Frames of one read, every sample they complete processed in order (``analyse``: a log is never late)."""
         if now is None:
             now = time.monotonic()
         if wall is None:
             wall = time.time()
+        for vehicle, sample in self._samples(route, frames, now):
+            self._handle(vehicle, sample, now, wall, t0_ns)
+        if self._flush is not None:
+            self._flush()
+
+    def on_reads(self, reads: list[Read]) -> None:
+        """The live path: every read one wake-up of the loop drained. Each vehicle's newest complete sample is
+        kept (the older ones are shed) and the kept ones are answered within the round's budget (``answer``)."""
+        now = time.monotonic()
+        newest = self._newest
+        for route, frames, t0_ns in reads:
+            for vehicle, sample in self._samples(route, frames, now):
+                older = newest.get(vehicle.sysid)
+                if older is not None:
+                    self._shed(older[0])
+                newest[vehicle.sysid] = (vehicle, sample, t0_ns)
+        self.answer()
+
+    def answer(self) -> bool:
+        """Answer the kept samples, the vehicles shed most in a row first (then the oldest sample first), until
+        the round's budget is spent; a sample older than its vehicle's deadline is shed instead. Returns whether
+        samples are left for the next round (the daemon calls again at once, after the links were drained)."""
+        newest = self._newest
+        if newest:
+            clock = time.perf_counter_ns
+            start = clock()
+            stop_at = start + self.round_ns
+            now, wall = time.monotonic(), time.time()
+            entries = sorted(newest.values(), key=_priority) if len(newest) > 1 else list(newest.values())
+            for vehicle, sample, t0_ns in entries:
+                t = clock()
+                if t >= stop_at:
+                    break
+                del newest[vehicle.sysid]
+                if self.table.vehicles.get(vehicle.sysid) is not vehicle:
+                    continue  # restarted or expired since: its old estimator is gone
+                if t - t0_ns > vehicle.deadline_ns:
+                    self._shed(vehicle)
+                    continue
+                vehicle.shed_run = 0
+                self._handle(vehicle, sample, now, wall, t0_ns)
+        if self._shed_round:
+            self._warn_shed()
+        if self._flush is not None:
+            self._flush()
+        return bool(newest)
+
+    def pending(self) -> bool:
+        """Whether kept samples wait for the next round."""
+        return bool(self._newest)
+
+    def _shed(self, vehicle: Vehicle) -> None:
+        """A sample not answered because a newer one of its vehicle came, or it grew too old: a lost sample."""
+        vehicle.shed += 1
+        vehicle.shed_run += 1
+        self.table.counters.shed += 1
+        self._shed_round[vehicle.sysid] = self._shed_round.get(vehicle.sysid, 0) + 1
+
+    def _warn_shed(self) -> None:
+        """One WARNING when shedding starts (an overload episode), naming who lost what in that round."""
+        shed, self._shed_round = self._shed_round, {}
+        if self.overloaded:
+            return
+        self.overloaded = True
+        self._shed_checked = self.table.counters.shed
+        who = ", ".join(f"vehicle {sysid}: {n}" for sysid, n in sorted(shed.items())[:5])
+        more = f" and {len(shed) - 5} more vehicles" if len(shed) > 5 else ""
+        log.warning(
+            "overloaded: %d sample(s) shed (%s%s); each vehicle's newest sample is answered, older ones are shed "
+            "(lost samples to the estimator, counted per vehicle as 'shed')",
+            sum(shed.values()),
+            who,
+            more,
+        )
+
+    def check_overload(self) -> bool:
+        """Housekeeping (1 Hz): the overload episode ends with a check that found no new shed sample (INFO)."""
+        total = self.table.counters.shed
+        if self.overloaded and total == self._shed_checked:
+            self.overloaded = False
+            log.info("no longer overloaded: %d sample(s) shed so far", total)
+            return True
+        self._shed_checked = total
+        return False
+
+    def _samples(self, route: tuple | None, frames: list[RawFrame], now: float) -> Iterator[tuple[Vehicle, Any]]:
+        """The samples the frames of one read complete. On a datagram link at most one sample per vehicle per
+        datagram and at most ``MAX_FRAMES_PER_DATAGRAM`` frames are looked at: one packet must not buy many
+        answers."""
         datagram = route is not None and getattr(route[0], "datagram", False)
         if datagram and len(frames) > MAX_FRAMES_PER_DATAGRAM:
             self.messages.excess += len(frames) - MAX_FRAMES_PER_DATAGRAM
@@ -127,7 +230,7 @@ class Pipeline:
                         self.messages.excess += 1
                         continue
                     answered.add(sysid)
-                self._handle(vehicle, sample, now, wall, t0_ns)
+                yield vehicle, sample
 
     def on_message(self, sysid: int, name: str, values: tuple, now: float, wall: float) -> None:
         """One message already decoded by name (a DataFlash log's record: ``values`` in its FMT column order),
@@ -140,6 +243,8 @@ class Pipeline:
         now = time.monotonic() if now is None else now
         for vehicle, sample in self.table.poll(now):
             self._handle(vehicle, sample, now, time.time() if wall is None else wall, time.perf_counter_ns())
+        if self._flush is not None:
+            self._flush()
 
     def flush(self, now: float, wall: float) -> None:
         """End of input (a log): process every sample still waiting for its actuator report."""
@@ -230,6 +335,7 @@ class Pipeline:
             run=p.vehicle.run,
             point=p.point,
             inside=p.inside,
+            shed=p.vehicle.shed,
         )
 
     # --- housekeeping and reporting -----------------------------------------------------------------
@@ -284,6 +390,7 @@ class Pipeline:
             "future",
             "foreign_source",
             "excess",
+            "shed",
             "frames_v1",
             "garbage",
             "truncated",
@@ -308,4 +415,13 @@ class Pipeline:
             "v1_refused": "MAVLink 1 refused (signed link)",
         }
         parts = [f"{names.get(key, key.replace('_', ' '))} {c[key]}" for key in order if key in c]
-        return ", ".join(parts) + f"; {timing}"
+        return ", ".join(parts) + f"; {timing}" + self._shed_by_vehicle()
+
+    def _shed_by_vehicle(self, most: int = 10) -> str:
+        """``; shed per vehicle: 1: 12, 7: 3`` (the ``most`` vehicles that lost most; nothing when none did)."""
+        shed = self.table.shed_by_vehicle()
+        if not shed:
+            return ""
+        worst = sorted(shed.items(), key=lambda item: (-item[1], item[0]))
+        text = ", ".join(f"{sysid}: {n}" for sysid, n in worst[:most])
+        return f"; shed per vehicle: {text}" + (f" and {len(worst) - most} more vehicles" if len(worst) > most else "")

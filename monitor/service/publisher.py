@@ -1,15 +1,19 @@
 """Zenoh side of the monitor: estimates, alarm events, the status queryable and the liveliness token.
 
-Why a queue and a thread: the control loop must never wait for Zenoh. The loop only appends a tuple of
-references (no JSON, no copies) to a deque whose length it checks against ``queue_max``; a publisher
-thread wakes every ``poll_s`` (2 ms), turns what is pending into JSON and puts it with
-``CongestionControl.BLOCK`` (so Zenoh itself does not drop in bursts). Why polling instead of a
-blocking queue: waking the thread on every sample made it fight the loop for the GIL on each sample
-(measured: +30 us per sample, benchmarks/bench_monitor.py); a 2 ms poll costs at most 2 ms of latency. If
-subscribers or the network fall behind, the thread blocks, the queue fills, and the loop drops *new estimates*
-(counted in ``dropped`` and logged at most every 5 s) instead of blocking. Alarm events are never dropped: they are
-rare, bounded by the hysteresis, and the one thing a listener must not miss. The status queryable always answers the
-newest estimate, dropped from the stream or not, because the loop stores it before the hand-off.
+Why estimates are put by the loop, once per round: a publisher thread that turned each estimate into JSON
+competed with the loop for the GIL, and every syscall of the loop (a read, a send) then waited for the
+thread's switch interval before it could go on (measured: the loop's sends were its most expensive line,
+``benchmarks/bench_monitor.py --overload``). Now ``estimate`` only keeps the item (a tuple of references: no
+JSON, no copies), and ``flush``, which the pipeline calls once per round after every command of the round has
+gone out, formats each estimate (``estimate_json``: a few us, a third of ``json.dumps``) and puts it with
+``CongestionControl.DROP``: a put never waits, and when a subscriber or the network falls behind, Zenoh drops
+estimates rather than holding up the commands (the status queryable always answers the newest one, dropped from
+the stream or not, because ``estimate`` stores it first). More than ``queue_max`` estimates waiting for the end of
+a round are dropped (counted in ``dropped``, logged at most every 5 s).
+
+Alarm events are never dropped: they are rare, bounded by the hysteresis, and the one thing a listener must not
+miss. They go through a queue to a thread that puts them with ``CongestionControl.BLOCK``; the thread sleeps on an
+event (no polling: an idle monitor does not wake it) and is woken by each alarm.
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from typing import Any
 
 import zenoh
 
-__all__ = ["EstimatePublisher", "estimate_payload", "alarm_payload"]
+__all__ = ["EstimatePublisher", "estimate_payload", "estimate_json", "alarm_payload"]
 
 log = logging.getLogger(__name__)
 
@@ -69,13 +73,47 @@ def estimate_payload(item: EstimateItem, unit: str) -> dict[str, Any]:
     return payload
 
 
+def _json_numbers(values) -> str:
+    """``[0.1,null]``: floats as ``json.dumps`` writes them (``repr``), a non-finite one as null."""
+    return "[" + ",".join(repr(v) if v - v == 0.0 else "null" for v in map(float, values)) + "]"
+
+
+_JSON_LITERAL = {True: "true", False: "false", None: "null"}
+
+
+def estimate_json(item: EstimateItem, unit: str) -> str:
+    """``json.dumps(estimate_payload(item, unit))``, the same keys in the same order, at a third of the cost (the
+    loop formats one per answered sample; tested equal, NaN and infinities included)."""
+    sysid, k, t, f_hat, x_hat, residual, u, tau, alarm, applied, effective = item[:11]
+    envelope = item[11] if len(item) > 11 else None
+    tail = (
+        f',"point":{json.dumps(envelope[0])},"in_envelope":{_JSON_LITERAL[bool(envelope[1])]}}}'
+        if envelope is not None
+        else "}"
+    )
+    return (
+        f'{{"sysid":{int(sysid)},"k":{int(k)},"t":{_json_float(t)},"f_hat":{_json_numbers(f_hat)},'
+        f'"x_hat":{_json_numbers(x_hat)},"residual":{_json_numbers(residual)},"u":{_json_numbers(u)},'
+        f'"tau":{"null" if tau is None else _json_float(tau)},"alarm":{_JSON_LITERAL[bool(alarm)]},'
+        f'"unit":{json.dumps(unit)},"command_applied":{_JSON_LITERAL[applied if applied is None else bool(applied)]},'
+        f'"commands_effective":{_JSON_LITERAL[bool(effective)]}' + tail
+    )
+
+
+def _json_float(value: float) -> str:
+    value = float(value)
+    if value - value != 0.0:  # NaN or infinite: strict JSON has neither (estimate_payload's t and tau pass as-is)
+        raise ValueError(f"Out of range float values are not JSON compliant: {value!r}")
+    return repr(value)
+
+
 def alarm_payload(sysid: int, k: int, t: float, state: str, f_hat) -> dict[str, Any]:
     """The contract's ``fault/alarm`` payload; ``state`` is "raised" or "cleared"."""
     return {"sysid": sysid, "k": k, "t": t, "state": state, "f_hat": _finite(f_hat)}
 
 
 class EstimatePublisher:
-    """Owns the monitor's Zenoh entities (not the session) and the publisher thread."""
+    """Owns the monitor's Zenoh entities (not the session) and the alarm thread."""
 
     def __init__(
         self,
@@ -84,7 +122,6 @@ class EstimatePublisher:
         name: str,
         unit: str = "deg",
         queue_max: int = 10_000,
-        poll_s: float = 0.002,
     ) -> None:
         self.session = session
         self.prefix = prefix.rstrip("/")
@@ -94,36 +131,60 @@ class EstimatePublisher:
         self.published = 0
         self.latest: dict[int, EstimateItem] = {}
         self.status_extra: dict[str, Any] = {}  # the daemon's health (e.g. a recording error), added to status replies
-        self.poll_s = poll_s
-        self._queue: collections.deque = collections.deque()
-        self._stop = threading.Event()
+        self._round: list[EstimateItem] = []  # the estimates of the round in progress
+        self._alarms: collections.deque = collections.deque()
+        self._wake = threading.Event()
+        self._stop = False
+        self._estimate_publishers: dict[int, zenoh.Publisher] = {}
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._last_drop_log = 0.0
         self.token = session.liveliness().declare_token(f"{self.prefix}/monitor/{name}")
         self.queryable = session.declare_queryable(f"{self.prefix}/*/fault/status", self._on_query)
-        self._thread = threading.Thread(target=self._run, name="zenoh-publisher", daemon=True)
+        self._thread = threading.Thread(target=self._run, name="zenoh-alarms", daemon=True)
         self._thread.start()
 
     # --- called by the loop (hot path) -------------------------------------------------------------
     def estimate(self, item: EstimateItem) -> None:
         self.latest[item[0]] = item
-        if len(self._queue) >= self.queue_max:
+        if len(self._round) >= self.queue_max:
             self.dropped += 1
             now = time.monotonic()
             if now - self._last_drop_log > 5.0:
                 self._last_drop_log = now
                 log.warning(
-                    "Zenoh publisher behind: %d estimates dropped so far (queue of %d full)",
+                    "Zenoh publisher behind: %d estimates dropped so far (more than %d in one round)",
                     self.dropped,
                     self.queue_max,
                 )
             return
-        self._queue.append(item)
+        self._round.append(item)
+
+    def flush(self) -> None:
+        """Put the round's estimates (the loop calls this once per round, after the round's commands)."""
+        if not self._round:
+            return
+        items, self._round = self._round, []
+        unit = self.unit
+        for item in items:
+            try:
+                self._estimate_publisher(item[0]).put(estimate_json(item, unit))
+                self.published += 1
+            except Exception as exc:  # a closed session or a bad value costs a log line, not the loop
+                log.debug("publish failed: %s", exc)
 
     def alarm(self, sysid: int, k: int, t: float, state: str, f_hat) -> None:
-        self._queue.append(("alarm", alarm_payload(sysid, k, t, state, f_hat)))
+        self._alarms.append(alarm_payload(sysid, k, t, state, f_hat))
+        self._wake.set()
 
-    # --- publisher thread ----------------------------------------------------------------------------
+    def _estimate_publisher(self, sysid: int) -> zenoh.Publisher:
+        pub = self._estimate_publishers.get(sysid)
+        if pub is None:
+            pub = self._estimate_publishers[sysid] = self.session.declare_publisher(
+                f"{self.prefix}/{sysid}/fault/estimate", encoding=_JSON, congestion_control=zenoh.CongestionControl.DROP
+            )
+        return pub
+
+    # --- alarm thread ----------------------------------------------------------------------------------
     def _publisher(self, key: str) -> zenoh.Publisher:
         pub = self._publishers.get(key)
         if pub is None:
@@ -134,21 +195,16 @@ class EstimatePublisher:
 
     def _run(self) -> None:
         while True:
-            stopping = self._stop.wait(self.poll_s)
-            while self._queue:
-                self._send(self._queue.popleft())
-            if stopping:
+            self._wake.wait()
+            self._wake.clear()
+            while self._alarms:
+                self._send(self._alarms.popleft())
+            if self._stop:
                 return
 
-    def _send(self, item: tuple) -> None:
+    def _send(self, payload: dict[str, Any]) -> None:
         try:
-            if item[0] == "alarm":
-                payload = item[1]
-                key = f"{self.prefix}/{payload['sysid']}/fault/alarm"
-            else:
-                payload = estimate_payload(item, self.unit)
-                key = f"{self.prefix}/{item[0]}/fault/estimate"
-            self._publisher(key).put(json.dumps(payload, allow_nan=False))
+            self._publisher(f"{self.prefix}/{payload['sysid']}/fault/alarm").put(json.dumps(payload, allow_nan=False))
             self.published += 1
         except Exception as exc:  # a closed session or a bad value costs a log line, not the thread
             log.debug("publish failed: %s", exc)
@@ -166,9 +222,11 @@ class EstimatePublisher:
             log.debug("status query failed: %s", exc)
 
     def close(self, timeout: float = 2.0) -> list[Any]:
-        """Drain what is queued (bounded by ``timeout``), stop the thread; return entities to undeclare."""
-        self._stop.set()
+        """Put what is pending (alarms bounded by ``timeout``), stop the thread; return entities to undeclare."""
+        self.flush()
+        self._stop = True
+        self._wake.set()
         self._thread.join(timeout)
         if self._thread.is_alive():
-            log.warning("Zenoh publisher still busy after %.1f s; %d items not sent", timeout, len(self._queue))
-        return [self.queryable, *self._publishers.values(), self.token]
+            log.warning("Zenoh publisher still busy after %.1f s; %d alarms not sent", timeout, len(self._alarms))
+        return [self.queryable, *self._estimate_publishers.values(), *self._publishers.values(), self.token]

@@ -7,9 +7,10 @@ under a microsecond, and safe to call from a signal handler's thread), and a bac
 turns the pending records into one Arrow batch per vehicle and ships it with ``send_record_batch``
 (one call per vehicle and flush; Rerun splits it into per-entity chunks):
 
-* flush policy: the writer polls every ``poll_s`` (10 ms) and writes everything pending as soon as
-  ``batch_size`` (256) records per vehicle seen are waiting or the oldest one has waited ``max_age_s``
-  (0.5 s), so the file lags the loop by at most ~0.5 s. Per vehicle because each flush costs about
+* flush policy: while records are pending the writer checks every ``poll_s`` (10 ms) and writes everything
+  pending as soon as ``batch_size`` (256) records per vehicle seen are waiting or the oldest one has waited
+  ``max_age_s`` (0.5 s), so the file lags the loop by at most ~0.5 s; with nothing pending it sleeps until the
+  next record (an idle monitor does not wake it). Per vehicle because each flush costs about
   1 ms of fixed Rerun work per vehicle: small batches over many vehicles would spend the GIL on it;
   batches grow by themselves when the writer is busy (it takes everything pending). Between vehicles
   the writer yields the GIL (``sleep(0)``) so the loop never waits behind a whole flush;
@@ -36,6 +37,7 @@ Entity paths (units: deg, deg/s, s; vectors are split into one scalar entity per
     /vehicle/<sysid>/residual/<i>          y(k) - C x_hat(k)
     /vehicle/<sysid>/timing/tau_obs        delay observed by the monitor, s (rows only when observed)
     /vehicle/<sysid>/timing/processing_ms  monitor processing time of the sample, ms
+    /vehicle/<sysid>/timing/shed           the vehicle's samples shed so far under overload (count)
     /vehicle/<sysid>/alarm                 1.0 while the fault alarm is raised, else 0.0
     /vehicle/<sysid>/run                   0 for the vehicle's first estimator, then 1, 2, ... after restarts
     /vehicle/<sysid>/truth/x/<i>           simulator ground truth (uav/<sysid>/truth), when subscribed
@@ -115,7 +117,7 @@ class FileSink(StreamWriter):
 
     def close(self, timeout_s: float) -> None:
         """Stop the writer, write what is left, the blueprint and the footer (in the calling thread)."""
-        self._stop.set()
+        self.stop()
         if self._thread is not threading.current_thread():
             self._thread.join(timeout_s)
         if self._thread.is_alive():

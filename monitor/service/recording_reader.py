@@ -204,7 +204,7 @@ def _assemble(cls: type, sysid: int, columns: list[_Column]) -> list[Any]:
     for name, (values, has) in scalars.items():
         if name == "alarm":
             per_row[name] = (has & (values >= 0.5)).tolist()
-        elif name == "run":
+        elif name in ("run", "shed"):
             per_row[name] = [int(v) if h else 0 for v, h in zip(values.tolist(), has.tolist(), strict=True)]
         elif name == "point":
             per_row[name] = [int(round(v)) if h else None for v, h in zip(values.tolist(), has.tolist(), strict=True)]
@@ -233,7 +233,7 @@ def _absent(name: str, n: int) -> list[Any]:
         return [None] * n
     if name in SAMPLE_VECTORS or name in TRUTH_VECTORS:
         return [[] for _ in range(n)]
-    if name == "run":
+    if name in ("run", "shed"):  # a recording from before shedding was counted: none shed
         return [0] * n
     return [False] * n if name == "alarm" else [math.nan] * n
 

@@ -41,6 +41,7 @@ class SampleRecord:
     run: int = 0  # 0 for a vehicle's first estimator, 1, 2, ... after each restart (runs are kept apart)
     point: int | None = None  # an envelope model: the index of the point that estimated the sample (None: one point)
     inside: bool | None = None  # ... and whether its schedule values were inside the identified range
+    shed: int = 0  # the vehicle's samples shed so far under overload (not answered; lost samples to the estimator)
 
 
 @dataclass

@@ -59,6 +59,7 @@ SAMPLE_SCALARS: dict[str, tuple[str, float]] = {
     "elevator": ("measured/elevator", 1.0),
     "tau_obs": ("timing/tau_obs", 1.0),
     "processing_s": ("timing/processing_ms", 1e3),
+    "shed": ("timing/shed", 1.0),
     "alarm": ("alarm", 1.0),
     "run": ("run", 1.0),
     "point": ("envelope/point", 1.0),  # envelope models only: a single-point model's rows leave them out
@@ -317,6 +318,7 @@ class StreamWriter:
         self._blueprint_at = -math.inf  # monotonic time of the last blueprint sent
         self._failures: set[str] = set()
         self._stop = threading.Event()
+        self._wake = threading.Event()  # set by the first record after a flush, and by ``stop``
         self._thread = threading.Thread(target=self._run, name=f"rrd-{label}", daemon=True)
         self.stats = {"submitted": 0, "written": 0, "failed": 0, "dropped": 0}
 
@@ -326,6 +328,7 @@ class StreamWriter:
         pending = self._pending
         if not pending:
             self._oldest = time.monotonic()
+            self._wake.set()  # once per flush, not per record: the writer sleeps while nothing is pending
         elif len(pending) == pending.maxlen:
             self.stats["dropped"] += 1  # the deque drops its oldest record on this append
         pending.append(rec)
@@ -339,8 +342,20 @@ class StreamWriter:
         oldest = self._oldest
         return bool(self._pending) and oldest is not None and time.monotonic() - oldest >= self.max_age_s
 
+    def stop(self) -> None:
+        """Ask the writer thread to finish (it wakes at once)."""
+        self._stop.set()
+        self._wake.set()
+
+    def _sleep(self, timeout: float | None) -> bool:
+        """Wait until woken (a first record, ``stop``) or ``timeout``; returns whether to stop."""
+        self._wake.wait(timeout)
+        self._wake.clear()
+        return self._stop.is_set()
+
     def _run(self) -> None:
-        while not self._stop.wait(self.poll_s):
+        # nothing pending: sleep until the first record (no polling while idle); then check every poll_s
+        while not self._sleep(self.poll_s if self._pending else None):
             if self._due():
                 self._drain()
 

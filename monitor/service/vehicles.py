@@ -61,6 +61,7 @@ APPLIED_TOLERANCE = 1e-3  # relative: float32 on the wire twice (command, report
 MAX_SPEEDUP = 100.0  # a vehicle's clock runs at most this much faster than ours (simulators with --speedup)
 CLOCK_JUMP_S = 2.0  # far-future stamps from the bound source alone for this long: its clock really jumped
 FUTURE_SLACK = 10  # samples a vehicle's clock may be ahead beyond that (jitter, lost samples)
+ANSWER_WITHIN = 0.75  # of a sample period: an older sample is shed, not answered (its command would come late)
 
 
 class Vehicle:
@@ -101,6 +102,9 @@ class Vehicle:
         "switches",
         "trim",
         "input_trim",
+        "shed",
+        "shed_run",
+        "deadline_ns",
     )
 
     def __init__(
@@ -149,6 +153,12 @@ class Vehicle:
         # origin (None before the first sample)
         self.trim: tuple[np.ndarray, tuple[float, ...], tuple[float, ...]] | None = None
         self.input_trim: dict[str, float] | None = None  # ... and the linear known inputs' trims
+        self.shed = 0  # samples not answered under overload (a newer one came first, or it grew too old)
+        self.shed_run = 0  # ... since its last answered sample
+        # how old a sample may be when its answer goes out: within its sample period (the contract's "late" is
+        # not applied by (k+1) h), with room for the way back; a lagged plant's commands may be in flight longer
+        plant = model.plant
+        self.deadline_ns = int(ANSWER_WITHIN * (plant.tau_max if plant.lags is not None else plant.h) * 1e9)
 
 
 @dataclass
@@ -165,6 +175,7 @@ class TableCounters:
     foreign_source: int = 0  # messages claiming a vehicle's sysid from another link/peer while it is live
     not_applied: int = 0  # commands the next sample's actuator report shows did not act
     outside_envelope: int = 0  # samples outside an envelope's identified range: estimated, not judged by the alarm
+    shed: int = 0  # samples not answered under overload: lost samples to the estimator (monitor.service.pipeline)
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -551,6 +562,14 @@ class VehicleTable:
         v = self.vehicles.pop(sysid)
         self._retired.append(v)
         return v
+
+    def shed_by_vehicle(self) -> dict[int, int]:
+        """Samples shed per system id, over all its runs (restarts and expiries included)."""
+        out: dict[int, int] = {}
+        for v in (*self._retired, *self.vehicles.values()):
+            if v.shed:
+                out[v.sysid] = out.get(v.sysid, 0) + v.shed
+        return out
 
     def assembly_totals(self) -> dict[str, int]:
         totals = AssemblyCounters().as_dict()
