@@ -27,7 +27,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from benchmarks.bench_monitor import _free_udp_port, bench_plant  # noqa: E402
+from benchmarks.bench_monitor import _free_udp_port, bench_plant, cpu_seconds  # noqa: E402
 from monitor.process import stop_process_group  # noqa: E402
 
 PEER = r"""
@@ -38,12 +38,6 @@ print("ready", flush=True)
 time.sleep(float(sys.argv[1]))
 session.close()
 """
-
-
-def cpu_seconds(pid: int) -> float:
-    """utime + stime of ``pid`` (all its threads), in seconds."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def measure(cmd: list[str], log_path: Path, seconds: float, ready: str) -> float:

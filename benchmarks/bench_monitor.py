@@ -162,8 +162,11 @@ def stop_server(proc: subprocess.Popen) -> None:
         proc.wait(5)
 
 
-def drive(port: int, vehicles: int, seconds: float, framing: str) -> tuple[list[float], int, int]:
-    """Paced load: every vehicle sends one sample per H; returns (round trips in s, sent, answered)."""
+def drive(
+    port: int, vehicles: int, seconds: float, framing: str, answered_in_time: set | None = None
+) -> tuple[list[float], int, int]:
+    """Paced load: every vehicle sends one sample per H; returns (round trips in s, sent, answered).
+    ``answered_in_time`` collects ``(vehicle, k)`` of the samples answered within H."""
     n = int(seconds / H)
     frames = [sample_frames(v + 1, n) for v in range(vehicles)]
     socks = []
@@ -200,6 +203,8 @@ def drive(port: int, vehicles: int, seconds: float, framing: str) -> tuple[list[
                         t0 = sent_at.pop((v, k), None)
                         if t0 is not None:
                             rtts.append(now - t0)
+                            if answered_in_time is not None and now - t0 <= H:
+                                answered_in_time.add((v, k))
                     i += 12 + mlen + (13 if data[i + 2] & 1 else 0)
 
     for k in range(n):
@@ -247,18 +252,38 @@ def overload(plant: Path, gains: Path, workdir: Path, seconds: float, fleets: li
             log_path = workdir / f"{kind}-{vehicles}.log"
             proc = start_server(kind, port, plant, gains, str(log_path))
             try:
-                rtts, sent, answered = drive(port, vehicles, seconds, "one message per datagram")
+                cpu0, t0 = cpu_seconds(proc.pid), time.monotonic()
+                timely: set[tuple[int, int]] = set()
+                rtts, sent, answered = drive(port, vehicles, seconds, "one message per datagram", timely)
+                cpu = (cpu_seconds(proc.pid) - cpu0) / (time.monotonic() - t0)
             finally:
                 stop_server(proc)
             in_time = sum(1 for r in rtts if r <= H)
             print(
                 f"  {vehicles:3d} x 50 Hz {kind:8s}: answered {answered / sent:6.1%} ({answered / seconds:6.0f}/s), "
                 f"within {H * 1e3:.0f} ms {in_time / seconds:6.0f}/s ({in_time / sent:6.1%}), "
-                f"round trip p50 {pct(rtts, 50) / 1e3:6.1f} ms p99 {pct(rtts, 99) / 1e3:6.1f} ms"
+                f"round trip p50 {pct(rtts, 50) / 1e3:6.1f} ms p99 {pct(rtts, 99) / 1e3:6.1f} ms, "
+                f"CPU {cpu:4.0%} of a core, longest run without a timely answer {longest_gap(timely, vehicles):3d}"
             )
         summary = [line for line in log_path.read_text().splitlines() if "stopped:" in line]
         if summary:
             print("      monitor summary:", summary[-1].split("stopped: ", 1)[1])
+
+
+def longest_gap(timely: set[tuple[int, int]], vehicles: int) -> int:
+    """The most consecutive samples of one vehicle not answered in time, between its first and last timely answer
+    (what ``verify --max-losses N`` must cover)."""
+    worst = 0
+    for v in range(vehicles):
+        ks = sorted(k for vv, k in timely if vv == v)
+        worst = max([worst, *(b - a - 1 for a, b in zip(ks, ks[1:], strict=False))])
+    return worst
+
+
+def cpu_seconds(pid: int) -> float:
+    """utime + stime of ``pid`` (all its threads), in seconds (Linux ``/proc``)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def pct(values: list[float], p: float) -> float:

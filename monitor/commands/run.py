@@ -320,8 +320,8 @@ def register(subparsers) -> None:
         type=int,
         default=10_000,
         metavar="N",
-        help="Zenoh hand-off queue length; estimates beyond it are dropped (counted), never waited for "
-        "(default: 10000)",
+        help="estimates held for Zenoh within one round of the loop; beyond it they are dropped (counted), never "
+        "waited for (default: 10000)",
     )
     from monitor.wire.zenoh_session import add_zenoh_arguments
 

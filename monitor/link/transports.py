@@ -205,6 +205,10 @@ class UdpLink(Link):
         self._v1_peers: set[object] = set()  # peers whose last datagram held MAVLink 1 frames
         self.remote: tuple | None = None
         self.stamped = False  # whether the kernel stamps each datagram's arrival (SO_TIMESTAMPNS)
+        # datagrams older than this when read are not parsed but handed to ``on_stale`` (0: off): what arrived
+        # while the monitor could not run is past every vehicle's deadline, and parsing it would only delay the rest
+        self.stale_ns = 0
+        self.on_stale: Callable[[list[bytes]], None] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
 
     async def start(self) -> None:
@@ -242,10 +246,12 @@ class UdpLink(Link):
         if sock is None:
             return
         reads: list[Read] = []
+        stale: list[bytes] = []
         clock = time.perf_counter_ns
         stamped = self.stamped
         # the kernel stamps with the wall clock: this offset turns a stamp into perf_counter_ns
         offset = clock() - time.time_ns() if stamped else 0
+        horizon = clock() - self.stale_ns if stamped and self.stale_ns and self.on_stale is not None else 0
         for _ in range(self.burst):
             try:
                 if stamped:
@@ -259,9 +265,14 @@ class UdpLink(Link):
             except OSError as exc:  # e.g. ICMP port unreachable reported on a connected socket
                 log.debug("%s: %s", self.spec, exc)
                 break
+            if t0 < horizon:
+                stale.append(data)
+                continue
             read = self._read(data, addr, t0)
             if read is not None:
                 reads.append(read)
+        if stale and self.on_stale is not None:
+            self.on_stale(stale)
         if reads:
             _guarded(self.handler, reads)
 

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from monitor.link.signing import Signer
-from monitor.link.transports import ConnectionSpec, Link, open_link
+from monitor.link.transports import ConnectionSpec, Link, UdpLink, open_link
 from monitor.service.alarm import AlarmConfig
 from monitor.service.fleet_file import Fleet
 from monitor.service.pipeline import Pipeline
@@ -42,6 +42,7 @@ __all__ = ["MonitorConfig", "build_pipeline", "run_daemon", "default_name"]
 log = logging.getLogger("monitor.run")
 
 SWITCH_INTERVAL_S = 0.0005
+LATE_TICK_S = 0.25  # a housekeeping tick this late: the loop was not running
 
 
 def default_name() -> str:
@@ -178,19 +179,23 @@ class _Timers:
     def start(self) -> None:
         for link in self.links:
             link.heartbeat()
-        self._housekeeping = self.loop.call_later(1.0, self._housekeep)
+        self._housekeeping = self.loop.call_at(self.loop.time() + 1.0, self._housekeep)
 
     def _housekeep(self) -> None:
         now = time.monotonic()
+        # a tick far behind its time: the loop could not run (stopped, starved), and what queued meanwhile is not
+        # read yet: the overload episode is not judged on it
+        late = self.loop.time() - self._housekeeping.when() > LATE_TICK_S if self._housekeeping else False
         pipeline = self.pipeline
         for link in self.links:
             link.heartbeat()
         pipeline.table.expire(now)
         pipeline.table.warn_missing(now)
         pipeline.warn_frames()
-        pipeline.check_overload()
+        if not late:
+            pipeline.check_overload()
         _check_recorder(pipeline)
-        self._housekeeping = self.loop.call_later(1.0, self._housekeep)
+        self._housekeeping = self.loop.call_at(self.loop.time() + 1.0, self._housekeep)
 
     def cancel(self) -> None:
         for handle in (self._round, self._poll, self._housekeeping):
@@ -209,6 +214,8 @@ async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
     try:
         for i, spec in enumerate(config.connections):
             link = open_link(spec, i, timers.on_reads, pipeline.frames, signer)
+            if isinstance(link, UdpLink):
+                link.stale_ns, link.on_stale = int(pipeline.deadline_s * 1e9), pipeline.on_stale
             await link.start()
             links.append(link)
         mode = "compensation only" if config.compensate else "observe-only" if config.observe else "closed loop"

@@ -36,7 +36,7 @@ from monitor.link.frames import FrameCounters, RawFrame
 from monitor.link.outgoing import alarm_text_frame, command_frame, fhat_frames
 from monitor.link.transports import Read
 from monitor.service.records import SampleRecord
-from monitor.service.vehicles import Processed, Vehicle, VehicleTable
+from monitor.service.vehicles import Processed, Vehicle, VehicleTable, answer_within
 
 __all__ = ["Pipeline", "MessageCounters", "percentile"]
 
@@ -45,6 +45,23 @@ log = logging.getLogger("monitor.run")
 _HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
 MAX_FRAMES_PER_DATAGRAM = 32  # a 64 KB datagram can pack ~800 frames: the rest is counted, not processed
 ROUND_S = 0.004  # answering budget of one round: the links are drained again after it (newer samples supersede)
+
+
+def _headers(data: bytes) -> Iterator[tuple[int, int]]:
+    """``(msgid, sysid)`` of each MAVLink frame in a datagram, from the headers alone (at most the per-datagram cap)."""
+    i, n = 0, len(data)
+    for _ in range(MAX_FRAMES_PER_DATAGRAM):
+        if i + 6 > n:
+            return
+        stx = data[i]
+        if stx == 0xFD and i + 10 <= n:
+            yield data[i + 7] | data[i + 8] << 8 | data[i + 9] << 16, data[i + 5]
+            i += 12 + data[i + 1] + (13 if data[i + 2] & 1 else 0)
+        elif stx == 0xFE:
+            yield data[i + 5], data[i + 3]
+            i += 8 + data[i + 1]
+        else:
+            return
 
 
 def _priority(entry: tuple[Vehicle, Any, int]) -> tuple[int, int]:
@@ -64,6 +81,7 @@ class MessageCounters:
     heartbeats: int = 0
     foreign: int = 0  # valid messages no signal map uses (routers forward plenty of them)
     excess: int = 0  # frames beyond the per-datagram cap, and samples beyond one per vehicle per datagram
+    old_datagrams: int = 0  # datagrams past every deadline when read (the monitor could not run): not parsed
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -166,6 +184,26 @@ class Pipeline:
         if self._flush is not None:
             self._flush()
         return bool(newest)
+
+    def on_stale(self, datagrams: list[bytes]) -> None:
+        """Datagrams a link read too late to be worth parsing (``UdpLink.stale_ns``): each instant message among
+        them is a shed sample of its vehicle. Read from the frame headers alone (no CRC check: a forged header
+        can only add to a count)."""
+        self.messages.old_datagrams += len(datagrams)
+        vehicles, wanted = self.table.vehicles, self._wanted
+        for data in datagrams:
+            for msgid, sysid in _headers(data):
+                vehicle = vehicles.get(sysid)
+                entry = wanted.get(msgid)
+                if vehicle is not None and entry is not None and entry[0] == vehicle.model.signals.instant:
+                    self._shed(vehicle)
+        if self._shed_round:
+            self._warn_shed()
+
+    @property
+    def deadline_s(self) -> float:
+        """The longest any vehicle's sample may wait for its answer: older datagrams need not be parsed."""
+        return max((answer_within(m) for m in self.table.fleet.models()), default=0.0)
 
     def pending(self) -> bool:
         """Whether kept samples wait for the next round."""
@@ -391,6 +429,7 @@ class Pipeline:
             "foreign_source",
             "excess",
             "shed",
+            "old_datagrams",
             "frames_v1",
             "garbage",
             "truncated",
@@ -411,6 +450,7 @@ class Pipeline:
         names = {
             "processed": "samples processed",
             "vehicles_seen": "vehicles",
+            "old_datagrams": "old datagrams (not parsed)",
             "frames_v1": "MAVLink 1 frames",
             "v1_refused": "MAVLink 1 refused (signed link)",
         }

@@ -74,8 +74,12 @@ def estimate_payload(item: EstimateItem, unit: str) -> dict[str, Any]:
 
 
 def _json_numbers(values) -> str:
-    """``[0.1,null]``: floats as ``json.dumps`` writes them (``repr``), a non-finite one as null."""
-    return "[" + ",".join(repr(v) if v - v == 0.0 else "null" for v in map(float, values)) + "]"
+    """``[0.1, null]``: floats as ``json.dumps`` writes them (``repr``), a non-finite one as null."""
+    floats = values.tolist() if hasattr(values, "tolist") else [float(v) for v in values]
+    text = repr(floats)  # one C call for the common case; "nan", "inf" are the only reprs with an "n"
+    if "n" not in text:
+        return text
+    return "[" + ", ".join(repr(v) if v - v == 0.0 else "null" for v in map(float, floats)) + "]"
 
 
 _JSON_LITERAL = {True: "true", False: "false", None: "null"}

@@ -50,7 +50,7 @@ from monitor.service.alarm import Alarm, AlarmConfig
 from monitor.service.delay import DelayTracker
 from monitor.service.fleet_file import EnvelopeModel, Fleet, VehicleModel
 
-__all__ = ["Vehicle", "Processed", "TableCounters", "VehicleTable"]
+__all__ = ["Vehicle", "Processed", "TableCounters", "VehicleTable", "answer_within"]
 
 log = logging.getLogger(__name__)
 
@@ -61,7 +61,14 @@ APPLIED_TOLERANCE = 1e-3  # relative: float32 on the wire twice (command, report
 MAX_SPEEDUP = 100.0  # a vehicle's clock runs at most this much faster than ours (simulators with --speedup)
 CLOCK_JUMP_S = 2.0  # far-future stamps from the bound source alone for this long: its clock really jumped
 FUTURE_SLACK = 10  # samples a vehicle's clock may be ahead beyond that (jitter, lost samples)
-ANSWER_WITHIN = 0.75  # of a sample period: an older sample is shed, not answered (its command would come late)
+ANSWER_WITHIN = 0.8  # of a sample period: an older sample is shed, not answered (its command would come late)
+
+
+def answer_within(model: VehicleModel) -> float:
+    """Seconds a sample may wait for its answer: ``ANSWER_WITHIN`` of a sample period (a lagged plant's commands
+    may be in flight up to its ``tau_max``)."""
+    plant = model.plant
+    return ANSWER_WITHIN * (plant.tau_max if plant.lags is not None else plant.h)
 
 
 class Vehicle:
@@ -157,8 +164,7 @@ class Vehicle:
         self.shed_run = 0  # ... since its last answered sample
         # how old a sample may be when its answer goes out: within its sample period (the contract's "late" is
         # not applied by (k+1) h), with room for the way back; a lagged plant's commands may be in flight longer
-        plant = model.plant
-        self.deadline_ns = int(ANSWER_WITHIN * (plant.tau_max if plant.lags is not None else plant.h) * 1e9)
+        self.deadline_ns = int(answer_within(model) * 1e9)
 
 
 @dataclass
