@@ -1,19 +1,18 @@
 """Zenoh side of the monitor: estimates, alarm events, the status queryable and the liveliness token.
 
-Why estimates are put by the loop, once per round: a publisher thread that turned each estimate into JSON
-competed with the loop for the GIL, and every syscall of the loop (a read, a send) then waited for the
-thread's switch interval before it could go on (measured: the loop's sends were its most expensive line,
-``benchmarks/bench_monitor.py --overload``). Now ``estimate`` only keeps the item (a tuple of references: no
-JSON, no copies), and ``flush``, which the pipeline calls once per round after every command of the round has
-gone out, formats each estimate (``estimate_json``: a few us, a third of ``json.dumps``) and puts it with
-``CongestionControl.DROP``: a put never waits, and when a subscriber or the network falls behind, Zenoh drops
-estimates rather than holding up the commands (the status queryable always answers the newest one, dropped from
-the stream or not, because ``estimate`` stores it first). More than ``queue_max`` estimates waiting for the end of
-a round are dropped (counted in ``dropped``, logged at most every 5 s).
+Why the loop formats and a thread puts: a publisher thread that turned each estimate into JSON competed with the
+loop for the GIL, and every syscall of the loop (a read, a send) then could wait for the thread's switch interval
+before it went on (the loop's sends were its most expensive line under load: ``benchmarks/bench_monitor.py
+--overload``). Now ``estimate`` only keeps the item (a tuple of references: no JSON, no copies); ``flush``, which
+the pipeline calls once per round after every command of the round has gone out, formats the round's estimates
+(``estimate_json``: a few us, a third of ``json.dumps``), queues them and wakes the thread once. The thread only
+puts (Zenoh's own work, in Rust) with ``CongestionControl.BLOCK``, so Zenoh does not drop in bursts; it sleeps on
+an event between rounds (no polling: an idle monitor does not wake it).
 
-Alarm events are never dropped: they are rare, bounded by the hysteresis, and the one thing a listener must not
-miss. They go through a queue to a thread that puts them with ``CongestionControl.BLOCK``; the thread sleeps on an
-event (no polling: an idle monitor does not wake it) and is woken by each alarm.
+If subscribers or the network fall behind, the thread blocks, the queue fills, and the loop drops *new estimates*
+(counted in ``dropped`` and logged at most every 5 s) instead of blocking. Alarm events are never dropped: they are
+rare, bounded by the hysteresis, and the one thing a listener must not miss. The status queryable always answers the
+newest estimate, dropped from the stream or not, because ``estimate`` stores it first.
 """
 
 from __future__ import annotations
@@ -117,7 +116,7 @@ def alarm_payload(sysid: int, k: int, t: float, state: str, f_hat) -> dict[str, 
 
 
 class EstimatePublisher:
-    """Owns the monitor's Zenoh entities (not the session) and the alarm thread."""
+    """Owns the monitor's Zenoh entities (not the session) and the thread that puts."""
 
     def __init__(
         self,
@@ -136,59 +135,52 @@ class EstimatePublisher:
         self.latest: dict[int, EstimateItem] = {}
         self.status_extra: dict[str, Any] = {}  # the daemon's health (e.g. a recording error), added to status replies
         self._round: list[EstimateItem] = []  # the estimates of the round in progress
-        self._alarms: collections.deque = collections.deque()
+        self._queue: collections.deque[tuple[str, str]] = collections.deque()  # (key, JSON) for the thread
         self._wake = threading.Event()
         self._stop = False
-        self._estimate_publishers: dict[int, zenoh.Publisher] = {}
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._last_drop_log = 0.0
         self.token = session.liveliness().declare_token(f"{self.prefix}/monitor/{name}")
         self.queryable = session.declare_queryable(f"{self.prefix}/*/fault/status", self._on_query)
-        self._thread = threading.Thread(target=self._run, name="zenoh-alarms", daemon=True)
+        self._thread = threading.Thread(target=self._run, name="zenoh-publisher", daemon=True)
         self._thread.start()
 
     # --- called by the loop (hot path) -------------------------------------------------------------
     def estimate(self, item: EstimateItem) -> None:
         self.latest[item[0]] = item
-        if len(self._round) >= self.queue_max:
-            self.dropped += 1
-            now = time.monotonic()
-            if now - self._last_drop_log > 5.0:
-                self._last_drop_log = now
-                log.warning(
-                    "Zenoh publisher behind: %d estimates dropped so far (more than %d in one round)",
-                    self.dropped,
-                    self.queue_max,
-                )
-            return
         self._round.append(item)
 
     def flush(self) -> None:
-        """Put the round's estimates (the loop calls this once per round, after the round's commands)."""
+        """Format the round's estimates and hand them to the thread (once per round, after the round's commands)."""
         if not self._round:
             return
         items, self._round = self._round, []
-        unit = self.unit
+        queue, unit, prefix = self._queue, self.unit, self.prefix
         for item in items:
+            if len(queue) >= self.queue_max:
+                self._drop()
+                continue
             try:
-                self._estimate_publisher(item[0]).put(estimate_json(item, unit))
-                self.published += 1
-            except Exception as exc:  # a closed session or a bad value costs a log line, not the loop
-                log.debug("publish failed: %s", exc)
-
-    def alarm(self, sysid: int, k: int, t: float, state: str, f_hat) -> None:
-        self._alarms.append(alarm_payload(sysid, k, t, state, f_hat))
+                queue.append((f"{prefix}/{item[0]}/fault/estimate", estimate_json(item, unit)))
+            except ValueError as exc:  # a non-finite time: not JSON; costs this estimate, not the loop
+                log.debug("estimate not published: %s", exc)
         self._wake.set()
 
-    def _estimate_publisher(self, sysid: int) -> zenoh.Publisher:
-        pub = self._estimate_publishers.get(sysid)
-        if pub is None:
-            pub = self._estimate_publishers[sysid] = self.session.declare_publisher(
-                f"{self.prefix}/{sysid}/fault/estimate", encoding=_JSON, congestion_control=zenoh.CongestionControl.DROP
+    def _drop(self) -> None:
+        self.dropped += 1
+        now = time.monotonic()
+        if now - self._last_drop_log > 5.0:
+            self._last_drop_log = now
+            log.warning(
+                "Zenoh publisher behind: %d estimates dropped so far (queue of %d full)", self.dropped, self.queue_max
             )
-        return pub
 
-    # --- alarm thread ----------------------------------------------------------------------------------
+    def alarm(self, sysid: int, k: int, t: float, state: str, f_hat) -> None:
+        payload = json.dumps(alarm_payload(sysid, k, t, state, f_hat), allow_nan=False)
+        self._queue.append((f"{self.prefix}/{sysid}/fault/alarm", payload))  # never dropped
+        self._wake.set()
+
+    # --- publisher thread ----------------------------------------------------------------------------
     def _publisher(self, key: str) -> zenoh.Publisher:
         pub = self._publishers.get(key)
         if pub is None:
@@ -198,20 +190,19 @@ class EstimatePublisher:
         return pub
 
     def _run(self) -> None:
+        queue = self._queue
         while True:
             self._wake.wait()
             self._wake.clear()
-            while self._alarms:
-                self._send(self._alarms.popleft())
+            while queue:
+                key, payload = queue.popleft()
+                try:
+                    self._publisher(key).put(payload)
+                    self.published += 1
+                except Exception as exc:  # a closed session costs a log line, not the thread
+                    log.debug("publish failed: %s", exc)
             if self._stop:
                 return
-
-    def _send(self, payload: dict[str, Any]) -> None:
-        try:
-            self._publisher(f"{self.prefix}/{payload['sysid']}/fault/alarm").put(json.dumps(payload, allow_nan=False))
-            self.published += 1
-        except Exception as exc:  # a closed session or a bad value costs a log line, not the thread
-            log.debug("publish failed: %s", exc)
 
     def _on_query(self, query: zenoh.Query) -> None:
         """Answer with each matching vehicle's latest estimate, on that vehicle's concrete key."""
@@ -226,11 +217,11 @@ class EstimatePublisher:
             log.debug("status query failed: %s", exc)
 
     def close(self, timeout: float = 2.0) -> list[Any]:
-        """Put what is pending (alarms bounded by ``timeout``), stop the thread; return entities to undeclare."""
+        """Put what is queued (bounded by ``timeout``), stop the thread; return entities to undeclare."""
         self.flush()
         self._stop = True
         self._wake.set()
         self._thread.join(timeout)
         if self._thread.is_alive():
-            log.warning("Zenoh publisher still busy after %.1f s; %d alarms not sent", timeout, len(self._alarms))
-        return [self.queryable, *self._estimate_publishers.values(), *self._publishers.values(), self.token]
+            log.warning("Zenoh publisher still busy after %.1f s; %d items not sent", timeout, len(self._queue))
+        return [self.queryable, *self._publishers.values(), self.token]
