@@ -466,9 +466,12 @@ def assemble_envelope(
         for var in sched:
             value = op.get(var)
             if not isinstance(value, (int, float)) or not _finite(value):
+                needs = DERIVED[var].inputs if var in DERIVED else (var,)
                 raise UserError(
                     f"{plant.source}: [signals] operating_point and condition have no {var!r} (they have "
-                    f"{', '.join(op)}); the schedule's signals must be in every point's operating point or condition"
+                    f"{', '.join(op)}); the schedule's signals must be in every point's operating point or condition "
+                    f"(identify writes {', '.join(needs)} into the condition when its signal map measures "
+                    f"{'them' if len(needs) > 1 else 'it'}: identify the leg again)"
                 )
             at[var] = float(value)
         rows.append((tuple(at[s] for s in sched), point, at, plant.raw))
