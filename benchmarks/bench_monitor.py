@@ -22,6 +22,7 @@ depend on them). Load generator: this process, one UDP socket per vehicle.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import select
 import signal
@@ -338,11 +339,112 @@ def inprocess(plant: Path, gains: Path, n: int = 20_000) -> None:
         close_quietly(session, *publisher.close())
 
 
+def where_time_goes(plant: Path, gains: Path, vehicles: int = 100, rounds: int = 200, profile: bool = False) -> None:
+    """Per answered sample, in process: ``vehicles`` send one sample each (one message per datagram, real loopback
+    sockets) into a real ``UdpLink``, which drains them and hands them to the pipeline, as in the daemon. Each stage
+    is timed by wrapping it (a few hundred ns of wrapper each); ``profile``: cProfile's top functions as well."""
+    import asyncio
+    import cProfile
+    import logging
+    import pstats
+
+    import monitor.service.pipeline as pipeline_module
+    from monitor.link.transports import UdpLink, parse_connection
+    from monitor.service.daemon import MonitorConfig, build_pipeline
+    from monitor.service.fleet_file import Fleet, load_model
+    from monitor.service.publisher import EstimatePublisher
+    from monitor.wire.zenoh_session import build_config, close_quietly, open_session
+
+    logging.disable(logging.WARNING)  # the load generator's vehicles never apply a command: one WARNING each
+    spent: dict[str, int] = {}
+
+    def timed(name: str, fn):
+        def wrapper(*args, **kwargs):
+            t = time.perf_counter_ns()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                spent[name] = spent.get(name, 0) + time.perf_counter_ns() - t
+
+        return wrapper
+
+    session = open_session(build_config())
+    publisher = EstimatePublisher(session, "bench", "bench")
+    pipeline = build_pipeline(MonitorConfig(fleet=Fleet(load_model(plant, gains)), connections=[]), publisher=publisher)
+    table = pipeline.table
+    stages = {
+        "estimator step and checks (VehicleTable.process)": (table, "process"),
+        "decode + assemble (VehicleTable.message)": (table, "message"),
+        "Zenoh: format the round's estimates (flush)": (publisher, "flush"),
+    }
+    for name, (owner, attr) in stages.items():
+        setattr(owner, attr, timed(name, getattr(owner, attr)))
+    pipeline._flush = publisher.flush
+    originals = (pipeline_module.command_frame, pipeline_module.fhat_frames)
+    pipeline_module.command_frame = timed("encode the command", pipeline_module.command_frame)
+    pipeline_module.fhat_frames = timed("encode the FHAT feedback", pipeline_module.fhat_frames)
+    frames = [sample_frames(v + 1, rounds) for v in range(vehicles)]
+    senders = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(vehicles)]
+    profiler = cProfile.Profile()
+
+    async def run() -> int:
+        link = UdpLink(parse_connection("udpin:127.0.0.1:0"), 0, pipeline.on_reads, pipeline.frames, None)
+        await link.start()
+        assert link.sock is not None and link._loop is not None
+        link._loop.remove_reader(link.sock.fileno())  # driven by hand below, one round per sample instant
+        link.send = timed("sendto (command + FHAT, one datagram)", link.send)  # type: ignore[method-assign]
+        address = link.sock.getsockname()
+        for sock in senders:
+            sock.setblocking(False)
+        total = 0
+        for k in range(rounds):
+            for v in range(vehicles):
+                for frame in frames[v][k]:
+                    senders[v].sendto(frame, address)
+            t = time.perf_counter_ns()
+            if profile:
+                profiler.enable()
+            link._readable()  # drain, parse, assemble, answer (the daemon's reader callback)
+            while pipeline.answer():
+                pass
+            if profile:
+                profiler.disable()
+            total += time.perf_counter_ns() - t
+            for sock in senders:  # the replies, unread by anyone: out of the way
+                with contextlib.suppress(BlockingIOError):
+                    while sock.recv(4096):
+                        pass
+        link.close()
+        return total
+
+    try:
+        total = asyncio.run(run())
+    finally:
+        pipeline_module.command_frame, pipeline_module.fhat_frames = originals
+        for sock in senders:
+            sock.close()
+        close_quietly(session, *publisher.close())
+        logging.disable(logging.NOTSET)
+    n = table.counters.processed
+    print(f"  where the time goes, per answered sample ({vehicles} vehicles, {n} samples, {table.counters.shed} shed):")
+    print(f"    {'all of it (drain, parse, answer; wrappers included)':55s} {total / n / 1e3:6.1f} us")
+    accounted = sum(spent.values())
+    for name, ns in sorted(spent.items(), key=lambda item: -item[1]):
+        print(f"    {name:55s} {ns / n / 1e3:6.1f} us")
+    print(f"    {'the rest: recvmsg x3, frame parsing x3, routing, loop':55s} {(total - accounted) / n / 1e3:6.1f} us")
+    if profile:
+        stats = pstats.Stats(profiler)
+        stats.sort_stats("tottime").print_stats(15)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=10.0, help="length of each paced run (default: 10)")
     parser.add_argument("--skip-inprocess", action="store_true")
     parser.add_argument("--flood", action="store_true", help="only the flood run")
+    parser.add_argument(
+        "--profile", action="store_true", help="only: where the time goes per sample, with cProfile's top functions"
+    )
     parser.add_argument(
         "--reuse",
         action="store_true",
@@ -359,7 +461,11 @@ def main() -> None:
     os.environ.setdefault("RERUN_ANALYTICS", "0")
     workdir = Path(tempfile.mkdtemp(prefix="bench-monitor-"))
     plant, gains = bench_plant(workdir)
+    if args.profile:
+        where_time_goes(plant, gains, profile=True)
+        return
     if args.overload is not None:
+        where_time_goes(plant, gains)
         overload(plant, gains, workdir, args.seconds, args.overload or [100, 200])
         return
     if args.flood:
@@ -395,6 +501,7 @@ def main() -> None:
         return
     if not args.skip_inprocess:
         inprocess(plant, gains)
+        where_time_goes(plant, gains)
     results: dict[tuple[str, str, int], tuple[list[float], int, int]] = {}
     for vehicles in (10, 100):
         for framing in ("one message per datagram", "packed"):

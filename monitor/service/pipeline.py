@@ -178,7 +178,9 @@ class Pipeline:
                     self._shed(vehicle)
                     continue
                 vehicle.shed_run = 0
-                self._handle(vehicle, sample, now, wall, t0_ns)
+                # the receive time is the arrival's (what the observed delay and the recording's wall_time mean),
+                # not this round's: a sample kept from an earlier round waited in the monitor, not on the link
+                self._handle(vehicle, sample, now, wall - (start - t0_ns) * 1e-9, t0_ns)
         if self._shed_round:
             self._warn_shed()
         if self._flush is not None:
