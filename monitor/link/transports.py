@@ -187,11 +187,12 @@ class UdpLink(Link):
     Why a raw non-blocking socket with ``loop.add_reader`` instead of an asyncio datagram transport: the
     transport reads one datagram per pass of the event loop, so a burst of one-message-per-datagram
     traffic (a router forwarding ten vehicles) pays a full loop pass per message. The reader drains the socket
-    until it is empty, up to ``burst`` datagrams per wake-up (bounded, so timers and other links still run),
-    and hands them to the pipeline in one call.
+    until it is empty, up to ``burst`` datagrams per wake-up (bounded, so timers and other links still run, and so
+    that a burst's first vehicles are answered before its last are read: 1,024 at once added ~1 ms to the round
+    trip's p50 at 200 vehicles), and hands them to the pipeline in one call.
     """
 
-    burst = 1024
+    burst = 128
     datagram = True
 
     def __init__(self, *args, max_peers: int = 1024, peer_timeout: float = 30.0, **kwargs) -> None:
