@@ -404,7 +404,8 @@ def where_time_goes(plant: Path, gains: Path, vehicles: int = 100, rounds: int =
             t = time.perf_counter_ns()
             if profile:
                 profiler.enable()
-            link._readable()  # drain, parse, assemble, answer (the daemon's reader callback)
+            for _ in range(3 * vehicles // link.burst + 1):  # the daemon's reader callbacks: drain, parse, answer
+                link._readable()
             while pipeline.answer():
                 pass
             if profile:
