@@ -130,7 +130,7 @@ def start_server(kind: str, port: int, plant: Path, gains: Path, log_path: str) 
             "-m",
             "monitor",
             "--log-level",
-            "WARNING",
+            "INFO",  # the exit summary (shed, processing times) is an INFO line
             "run",
             "--plant",
             str(plant),
