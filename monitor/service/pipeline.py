@@ -148,11 +148,20 @@ class Pipeline:
         kept (the older ones are shed) and the kept ones are answered within the round's budget (``answer``)."""
         now = time.monotonic()
         newest = self._newest
+        # observe-only (nothing is sent): a sample that a newer one overtook is still estimated, in order, while it
+        # is within its deadline; there is no answer to keep current, and each one shed is a sample the observer
+        # loses (a vehicle streaming faster than real time, a replay through a router, sends bursts of its own)
+        estimate_all = self.table.observe and not self.table.compensate
         for route, frames, t0_ns in reads:
             for vehicle, sample in self._samples(route, frames, now):
                 older = newest.get(vehicle.sysid)
                 if older is not None:
-                    self._shed(older[0])
+                    if estimate_all and time.perf_counter_ns() - older[2] <= vehicle.deadline_ns:
+                        del newest[vehicle.sysid]
+                        arrived = time.time() - (time.perf_counter_ns() - older[2]) * 1e-9
+                        self._handle(older[0], older[1], now, arrived, older[2])
+                    else:
+                        self._shed(older[0])
                 newest[vehicle.sysid] = (vehicle, sample, t0_ns)
         self.answer()
 
