@@ -156,10 +156,8 @@ class Pipeline:
             for vehicle, sample in self._samples(route, frames, now):
                 older = newest.get(vehicle.sysid)
                 if older is not None:
-                    if estimate_all and time.perf_counter_ns() - older[2] <= vehicle.deadline_ns:
-                        del newest[vehicle.sysid]
-                        arrived = time.time() - (time.perf_counter_ns() - older[2]) * 1e-9
-                        self._handle(older[0], older[1], now, arrived, older[2])
+                    if estimate_all:
+                        self._settle(older, time.perf_counter_ns(), now, time.time())
                     else:
                         self._shed(older[0])
                 newest[vehicle.sysid] = (vehicle, sample, t0_ns)
@@ -176,25 +174,31 @@ class Pipeline:
             stop_at = start + self.round_ns
             now, wall = time.monotonic(), time.time()
             entries = sorted(newest.values(), key=_priority) if len(newest) > 1 else list(newest.values())
-            for vehicle, sample, t0_ns in entries:
+            for entry in entries:
                 t = clock()
                 if t >= stop_at:
                     break
-                del newest[vehicle.sysid]
-                if self.table.vehicles.get(vehicle.sysid) is not vehicle:
-                    continue  # restarted or expired since: its old estimator is gone
-                if t - t0_ns > vehicle.deadline_ns:
-                    self._shed(vehicle)
-                    continue
-                vehicle.shed_run = 0
-                # the receive time is the arrival's (what the observed delay and the recording's wall_time mean),
-                # not this round's: a sample kept from an earlier round waited in the monitor, not on the link
-                self._handle(vehicle, sample, now, wall - (start - t0_ns) * 1e-9, t0_ns)
+                del newest[entry[0].sysid]
+                self._settle(entry, t, now, wall + (t - start) * 1e-9)
         if self._shed_round:
             self._warn_shed()
         if self._flush is not None:
             self._flush()
         return bool(newest)
+
+    def _settle(self, entry: tuple[Vehicle, Any, int], t_ns: int, now: float, wall: float) -> None:
+        """One kept sample at clock ``t_ns`` (``wall``: the wall time then): answered, or shed when it is past its
+        vehicle's deadline; dropped when its vehicle was restarted or expired since (its old estimator is gone)."""
+        vehicle, sample, t0_ns = entry
+        if self.table.vehicles.get(vehicle.sysid) is not vehicle:
+            return
+        if t_ns - t0_ns > vehicle.deadline_ns:
+            self._shed(vehicle)
+            return
+        vehicle.shed_run = 0
+        # the receive time is the arrival's (what the observed delay and the recording's wall_time mean), not this
+        # round's: a sample kept from an earlier round waited in the monitor, not on the link
+        self._handle(vehicle, sample, now, wall - (t_ns - t0_ns) * 1e-9, t0_ns)
 
     def on_stale(self, datagrams: list[bytes]) -> None:
         """Datagrams a link read too late to be worth parsing (``UdpLink.stale_ns``): each instant message among
