@@ -39,7 +39,7 @@ import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 
@@ -51,6 +51,7 @@ from monitor.model.closed_loop import Gains, LoopMatrices, closed_loop, observer
 from monitor.model.delay_model import b0_polytope
 from monitor.model.envelope import Envelope
 from monitor.model.plant import Plant
+from monitor.parallel import run_tasks
 
 __all__ = [
     "CommonCertificate",
@@ -66,6 +67,7 @@ __all__ = [
 ]
 
 SEGMENTS = 8  # chords of each point's delay polytope: those of the single-point designs
+POINT = "point '{}'"  # how an error in a point's own design or certificate names the point
 STATEMENT = (
     "one Lyapunov matrix P for the real closed loop of every point (each with its own gains) at every vertex of "
     "its delay polytope: the loop stays stable and ||e_f|| <= gamma ||w|| (w = [d; Delta f]) under any switching "
@@ -77,7 +79,6 @@ NOT_COVERED = (
     "points (switching is covered, interpolation is not)"
 )
 
-T = TypeVar("T")
 Say = Callable[[str], None]
 
 
@@ -144,20 +145,6 @@ def _certify_point(
 # Each worker process runs one small problem at a time: its BLAS and the solver's thread pool get one thread each.
 # Measured on 2 cores, 3 points of a 4-state aircraft in 2 processes: 12.4 s with the default threads (two
 # processes spinning two BLAS threads each on two cores), 2.8 s with one.
-def _run_all(
-    fn: Callable[..., T],
-    tasks: Sequence[tuple[str, tuple[Any, ...]]],
-    jobs: int,
-    done: Callable[[str, T, float], None],
-    scheduler: str | None = None,
-) -> dict[str, T]:
-    """``fn(*args)`` per point on Dask (``monitor.parallel``: a local cluster of ``jobs`` processes, or the cluster
-    at ``scheduler``; in this process when 1); an error names its point."""
-    from monitor.parallel import run_tasks
-
-    return run_tasks(fn, tasks, jobs, done, scheduler, what="point '{}'")
-
-
 # -- the common certificate ----------------------------------------------------------------------------------------
 
 
@@ -339,7 +326,7 @@ def design_envelope(
         )
 
     tasks = [(n, (plants[n], method, dict(options))) for n in names]
-    results = _run_all(_design_point, tasks, jobs, designed, scheduler)
+    results = run_tasks(_design_point, tasks, jobs, designed, scheduler, what=POINT)
     t_points = time.perf_counter() - t0
     t1 = time.perf_counter()
     vertices = {n: point_vertices(plants[n]) for n in names}
@@ -438,7 +425,7 @@ def _recertify(
             tell(f"  point '{name}' ({where[name]}) re-certified: gamma_e {cert[0]:.4g}, gamma_z {cert[1]:.4g}")
 
     tasks = [(n, (plants[n], gains[n], vertices[n])) for n in redesigned]
-    certs = _run_all(_certify_point, tasks, jobs, done, scheduler)
+    certs = run_tasks(_certify_point, tasks, jobs, done, scheduler, what=POINT)
     out = dict(results)
     for name, cert in certs.items():
         if cert is None:

@@ -1,4 +1,4 @@
-"""Scheduling an envelope's points on the measured values: which point, whether inside, and the switch.
+"""Scheduling an envelope's points on the measured values: which point, whether inside, and the trim between them.
 
 Pure functions of the envelope's lookup table (:class:`Schedule`) and the estimator's state vector; the live loop
 (``monitor.service.vehicles``) calls them once per sample and owns the state they decide about.
@@ -10,9 +10,9 @@ From the current point ``c`` the scheduler moves to the nearest point ``j`` only
 variable that is 5 % of the spacing past the midpoint of the two points, and the way back 5 % short of it: a
 dead band 10 % of the spacing wide about each midpoint, so a value wandering about a midpoint (turbulence on
 the airspeed) does not chatter between the points. Why a band and not a dwell time: the envelope's certificate
-covers switching at any rate (docs/explanation/envelope.md), so the band is not needed for stability; it is
-there for the offsets' jumps (each switch re-bases the state, which is exact only as far as the points' trims
-are consistent), and a band in the measured variable adds no delay to a real change of flight condition.
+covers switching at any rate (docs/explanation/envelope.md), so the band is not needed for stability; it keeps
+the model (gains and matrices) from chattering, and a band in the measured variable adds no delay to a real
+change of flight condition.
 
 **Inside or outside the identified range.** Per variable, with the points' distinct values ``v_1 < ... < v_N``:
 inside when ``v_1 - (v_2 - v_1)/2 <= x <= v_N + (v_N - v_{N-1})/2``, i.e. no further below the lowest point or
@@ -22,9 +22,12 @@ schedule whose points do not fill the box) is served by its nearest point, not f
 single value across the points (every point at the same bank) bounds nothing. Outside, the estimator still runs
 on the nearest point (the estimate goes on) but the live loop pauses the alarm (``monitor.service.vehicles``).
 
-**Re-basing the state on a switch.** The estimator's state ``z = [x_hat; f_hat; u(k-1)]`` is in deviations from
-the point's operating point (``y0``, ``u0`` of its ``[signals]``). Moving from point ``i`` to ``j`` keeps the
-absolute quantities: with ``T_p = pinv(C_p)`` (the state that the outputs' trim gives),
+**The trim, interpolated; the state re-based to it.** The estimator's state ``z = [x_hat; f_hat; u(k-1)]`` is in
+deviations from a trim: the points' trims (``y0``, ``u0`` of their ``[signals]``, and their offsets ``w_p``
+below) weighted by :func:`trim_weights` at the sample's schedule values, so that the trim follows the flight
+instead of jumping at a switch. Each sample the state moves from the last trim's deviations to the new one's,
+keeping the absolute quantities; between two points' trims: with ``T_p = pinv(C_p)`` (the state that the outputs'
+trim gives),
 
     x_hat_j  = x_hat_i + T_i y0_i - T_j y0_j          (= x_hat_i + T (y0_i - y0_j) when the points share C)
     u(k-1)_j = u(k-1)_i + (u0_i - u0_j)               (and each command still in flight of a lagged plant)
@@ -34,7 +37,8 @@ The state's operating point is known only through the outputs: ``T (y0_i - y0_j)
 invertible, which it is for identified models (``C = I``: every state is measured), and the least-squares
 estimate of the trim's move otherwise (an unmeasured state's trim is taken as unchanged). Written as
 ``z_j = z_i + w_i - w_j`` with one offset ``w_p`` per point, re-basing from ``i`` to ``j`` and back is the
-identity. The reported channel's low-pass state (``EstimatorState.f_reported``) is ``f_hat``'s and is kept.
+identity, and an interpolated trim's offset is the same weighted sum of the ``w_p``. The reported channel's
+low-pass state (``EstimatorState.f_reported``) is ``f_hat``'s and is kept.
 """
 
 from __future__ import annotations

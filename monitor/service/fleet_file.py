@@ -66,16 +66,15 @@ class VehicleModel:
 
 @dataclass(frozen=True, eq=False)
 class EnvelopeModel:
-    """An envelope's points as single-point models, the schedule that picks among them and each point's offset in
-    the estimator's state (``monitor.model.scheduling``: a switch re-bases the state by their difference)."""
+    """An envelope's points as single-point models, the schedule that picks among them, and each point's trim: its
+    offset in the estimator's state and its output and actuator trims (``monitor.model.scheduling``: the state is
+    re-based every sample to the trims interpolated at the sample)."""
 
     envelope: Envelope
     gains: EnvelopeGainsFile
     points: tuple[VehicleModel, ...]
     schedule: Schedule
-    offsets: tuple[np.ndarray, ...]
-    # the same offsets, and the points' output and actuator trims, one row per point: what the trims interpolated
-    # between the points are weighted sums of (monitor.model.scheduling.trim_weights)
+    # one row per point: what the trims interpolated between the points are weighted sums of (``trim_weights``)
     offset_rows: np.ndarray
     y0_rows: np.ndarray
     u0_rows: np.ndarray
@@ -202,7 +201,7 @@ def load_envelope_model(
                 "envelope must read the same MAVLink fields; only their operating points differ)"
             )
         points.append(_single(point.plant, gf, signals))
-    offsets = tuple(
+    offsets = [
         state_offset(
             m.plant.physical.C,
             m.signals.y0,
@@ -212,13 +211,12 @@ def load_envelope_model(
             m.plant.lags.last if m.plant.lags is not None else 0,
         )
         for m in points
-    )
+    ]
     scheduled = EnvelopeModel(
         envelope,
         gains,
         tuple(points),
         schedule_of(envelope),
-        offsets,
         np.array(offsets),
         np.array([m.signals.y0 for m in points], dtype=float),
         np.array([m.signals.u0 for m in points], dtype=float),

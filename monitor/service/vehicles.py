@@ -24,8 +24,9 @@ map that names a message the vehicle does not send; a silent monitor would look 
 An envelope model (``VehicleModel.envelope``) is scheduled per vehicle and per sample on the values of the
 schedule's signals in the assembled sample (the assembler needs them as it needs the outputs):
 ``monitor.model.scheduling`` picks the point (the nearest, with a dead band of 10 % of the spacing about each
-midpoint) and, on a switch, re-bases the estimator's state (and the last command, in deviations too) into the
-new point's operating point; the point's own estimator and signal map step the sample. A sample whose
+midpoint) and interpolates the points' trims at the sample; the estimator's state (and the last command, in
+deviations too) is re-based to that trim every sample, and the point's own estimator and signal map step the
+sample about it. A sample whose
 schedule values lie outside the identified range (further below the lowest point or above the highest than
 half the spacing to its neighbour, or not finite) is *outside*: the estimator still steps it on the nearest
 point, so f_hat goes on, but the alarm does not see it (nothing is raised or cleared on it), it is counted in
