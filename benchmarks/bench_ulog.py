@@ -22,9 +22,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from tests.derived_maps import MAVLINK_MAP  # noqa: E402
 from tests.px4_flight import H, fly, write_mavlink_tlog, write_px4_ulog  # noqa: E402 - found through sys.path
 from tests.readme_blocks import file_block  # noqa: E402
-from tests.test_derived_signals import MAVLINK_MAP  # noqa: E402
 
 
 def read_ulog(path: Path) -> tuple[float, float, int, int]:

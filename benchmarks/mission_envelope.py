@@ -22,16 +22,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import select
-import socket
 import subprocess
 import sys
 import tempfile
 import time
-import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from sim_vehicle.mission import load_mission  # noqa: E402 - found through the sys.path entry above
+from tests.mission_logs import legs, log_mission, segments  # noqa: E402
 
 
 def _monitor(*args: str) -> subprocess.CompletedProcess:
@@ -42,60 +43,22 @@ def _monitor(*args: str) -> subprocess.CompletedProcess:
     return done
 
 
-def log_flight(mission: Path, tlog: Path, speedup: float, seed: int, aircraft: str = "c172p") -> float:
-    """Fly ``mission`` on sim-vehicle ``aircraft``, logging every datagram as a MAVProxy-style tlog; the seconds
-    taken."""
-    from monitor.link.tlog import TlogWriter
-
+def log_flight(mission: Path, work: Path, name: str, args: argparse.Namespace) -> tuple[Path, float]:
+    """``mission`` flown on sim-vehicle ``--aircraft`` at ``--speedup``, every datagram into ``work/NAME.tlog``
+    as a ground station logs it (``tests.mission_logs``); the log and the seconds taken."""
     start = time.monotonic()
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock, TlogWriter(tlog) as writer:
-        sock.bind(("127.0.0.1", 0))
-        port = sock.getsockname()[1]
-        sim = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "sim_vehicle",
-                "run",
-                "--aircraft",
-                aircraft,
-                "--mission",
-                str(mission),
-                "--mavlink",
-                f"udpout:127.0.0.1:{port}",
-                "--speedup",
-                f"{speedup:g}",
-                "--seed",
-                str(seed),
-                "--no-zenoh",
-                "--log-level",
-                "WARNING",
-            ],
-            cwd=ROOT,
-            stdout=subprocess.DEVNULL,  # its summary: the flight is what is measured here
-        )
-        quiet_until = None
-        while True:
-            ready, _, _ = select.select([sock], [], [], 0.2)
-            if ready:
-                writer.write_datagram(time.time_ns() // 1000, sock.recv(65535))
-                continue
-            if sim.poll() is not None:
-                quiet_until = quiet_until or time.monotonic() + 0.5
-                if time.monotonic() > quiet_until:
-                    break
-        if sim.returncode != 0:
-            raise SystemExit(f"sim-vehicle exited {sim.returncode}")
-    return time.monotonic() - start
-
-
-def segments(mission: Path) -> list[tuple[str, float, float]]:
-    """(name, start s, end s) of each segment, from the vehicle's first sample."""
-    out, t = [], 0.0
-    for seg in tomllib.loads(mission.read_text())["segment"]:
-        out.append((seg["name"], t, t + float(seg["duration"])))
-        t += float(seg["duration"])
-    return out
+    budget = 60.0 + 3.0 * load_mission(mission).duration / args.speedup
+    tlog = log_mission(
+        work,
+        mission,
+        "--seed",
+        str(args.seed),
+        aircraft=args.aircraft,
+        name=name,
+        budget_s=budget,
+        speedup=f"{args.speedup:g}",
+    )
+    return tlog, time.monotonic() - start
 
 
 def max_fhat(records: list[dict], start: float, end: float) -> float:
@@ -115,12 +78,6 @@ def analyse(tlog: Path, plant: Path, gains: Path, rrd: Path) -> tuple[dict, list
     t0 = samples[0].t
     rows = [{"t": s.t - t0, "f_hat": s.f_hat, "point": s.point, "inside": s.inside} for s in samples]
     return report, rows
-
-
-def legs(mission: Path) -> list[tuple[str, float, float]]:
-    """The identification legs of ``mission`` (the segments with ``excite``): (name, start s, end s)."""
-    excited = {seg["name"] for seg in tomllib.loads(mission.read_text())["segment"] if "excite" in seg}
-    return [leg for leg in segments(mission) if leg[0] in excited]
 
 
 def main() -> int:
@@ -149,8 +106,7 @@ def main() -> int:
     mission, id_mission = Path(args.mission), Path(args.id_mission)
 
     # 1-2. identification legs, plants, the envelope and the designs
-    id_log = work / "identification.tlog"
-    took = log_flight(id_mission, id_log, args.speedup, args.seed, args.aircraft)
+    id_log, took = log_flight(id_mission, work, "identification", args)
     print(f"identification flight: {took:.1f} s", file=sys.stderr)
     plants: list[Path] = []
     for leg, a, b in legs(id_mission):
@@ -168,8 +124,7 @@ def main() -> int:
     _monitor("design", "--plant", str(one), "--out", str(one_gains), "--quiet")
 
     # 3-4. the mission, and both models over its log
-    flight = work / "mission.tlog"
-    took = log_flight(mission, flight, args.speedup, args.seed, args.aircraft)
+    flight, took = log_flight(mission, work, "mission", args)
     print(f"mission flight: {took:.1f} s", file=sys.stderr)
     _one_report, one_rows = analyse(flight, one, one_gains, work / "one.rrd")
     env_report, scheduled = analyse(flight, env, env_gains, work / "env.rrd")

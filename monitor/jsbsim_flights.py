@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from monitor.checks.calibration import calibrate_threshold
+from monitor.checks.calibration import calibrate_threshold, crossing_rates
 from monitor.checks.detectability import Detectability, upcrossing_rate
 from monitor.errors import UserError
 from monitor.model.plant import Plant
@@ -235,15 +235,16 @@ def monte_carlo(
     onset = warm + int(round(plan.minutes * 60.0 / h))
     window = int(math.floor(prediction.within_s / h + 1e-9))
     levels = [prediction.threshold * f for f in (0.5, 0.75, 1.0)]
-    fh_all, crossings, detections, smallest, disturbances = [], np.zeros(len(levels)), [], [], []
+    fh_all: list[np.ndarray] = []
+    detections: list[float | None] = []
+    smallest: list[float] = []
+    disturbances: list[dict] = []
     false_alarms = 0
     for i in range(flights):
         seed = plan.seed + i
         loop = _fly(model, plan, prediction.turbulence, seed, (onset + window + 2) * h, prediction.bias, onset, alarm)
         fh = np.array([loop.f_hat[k] for k in range(warm, onset)])
         fh_all.append(fh)
-        for n, c in enumerate(levels):
-            crossings[n] += np.sum((fh[:-1] < c) & (fh[1:] >= c)) + np.sum((fh[:-1] > -c) & (fh[1:] <= -c))
         false_alarms += len(loop.raised(warm, onset))
         found = _detected(loop, onset, window)
         detections.append(None if found is None else found * h)
@@ -259,6 +260,7 @@ def monte_carlo(
             + f" within {prediction.within_s:g} s; smallest detected {smallest[-1]:.3g}"
         )
     hours = flights * (onset - warm) * h / 3600.0
+    crossings = crossing_rates(fh_all, np.array(levels), h)[0]
     calibration = calibrate_threshold(fh_all, h, prediction.false_alarms_per_hour, prediction.threshold)
     at_calibrated = None
     if calibration is not None:  # the alarm's own logic over the same pre-fault estimates, at the calibrated level

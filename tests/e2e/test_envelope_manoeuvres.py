@@ -9,7 +9,6 @@ fault, then a 2 deg bias from the middle of the slow-down. Loopback only; every 
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +23,7 @@ from monitor.service.fleet_file import Fleet, load_model
 from monitor.service.offline import analyse_log
 from tests.daemons import REPO
 from tests.mission_logs import log_mission
+from tests.mission_logs import segments as mission_segments
 
 pytestmark = [pytest.mark.slow, pytest.mark.daemons]
 
@@ -68,11 +68,7 @@ AIRCRAFT = {
 
 
 def segments(mission: Path) -> dict[str, tuple[float, float]]:
-    out, t = {}, 0.0
-    for seg in tomllib.loads(mission.read_text())["segment"]:
-        out[seg["name"]] = (t, t + float(seg["duration"]))
-        t += float(seg["duration"])
-    return out
+    return {name: (start, end) for name, start, end in mission_segments(mission)}
 
 
 def read(tlog: Path, plant: Path, gains: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
