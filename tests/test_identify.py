@@ -425,3 +425,60 @@ def test_a_known_input_that_does_not_move_or_is_a_state_is_one_line(c172p_flight
     assert stderr.count("\n") == 1 and not out.exists()
     code, _stdout, stderr = _identify(str(c172p_flight["log"]), "--known-input", "q", "--out", str(out))
     assert code == 2 and "--known-input q: it is a state or the actuator of the model" in stderr
+
+
+def test_air_only_on_an_envelope_measures_with_the_nearest_point_and_scales_every_point_by_airspeed(
+    c172p_flight, tmp_path: Path
+) -> None:
+    """``--air-only ENV.toml``: the gust is measured once, with the point nearest where the log flew (the same
+    figure as that point's own plant gives), and carried to every point as ``sigma V_m / V`` and ``T V_m / V``
+    (a vertical gust seen as an angle of attack, and its length over the speed). A log that moves the schedule
+    over a large share of the points' span is refused in one line."""
+    import re
+
+    from monitor.model.envelope import load_envelope
+
+    log = str(c172p_flight["log"])
+    cruise = tmp_path / "cruise.toml"
+    assert _identify(log, "--out", str(cruise))[0] == 0
+    v_cruise = load_plant(cruise).signals["operating_point"]["airspeed"]
+
+    def moved(name: str, speed: float) -> Path:  # the same model placed at another airspeed
+        text = re.sub(r"airspeed = [0-9.eE+-]+", f"airspeed = {speed!r}", cruise.read_text("utf-8"), count=1)
+        path = tmp_path / f"{name}.toml"
+        path.write_text(text, "utf-8")
+        return path
+
+    for name, slow in (("wide", 0.7 * v_cruise), ("narrow", v_cruise - 0.05)):
+        env = tmp_path / f"{name}-env.toml"
+        code = main_cli(
+            "envelope", str(cruise), str(moved(f"{name}-slow", slow)), "--schedule", "airspeed", "--out", str(env)
+        )
+        assert code == 0
+        out = tmp_path / f"{name}-air.toml"
+        code, stdout, stderr = _identify(log, "--air-only", str(env), "--turbulence", "light", "--out", str(out))
+        if name == "narrow":  # the flight's own speed changes cover the points' 0.05 m/s many times over
+            assert code == 2 and "--window" in stderr and len(stderr.strip().splitlines()) == 1, stderr
+            assert not out.exists()
+            continue
+        assert code == 0 and "with point cruise" in stdout, stderr
+    kept = tmp_path / "kept.toml"
+    assert _identify(log, "--air-only", str(cruise), "--out", str(kept))[0] == 0
+    single = load_plant(kept).disturbance
+    points = {p.name: p.plant for p in load_envelope(tmp_path / "wide-air.toml").points}
+    fast, slow_point = points["cruise"].disturbance, points["wide-slow"].disturbance
+    assert fast.turbulence == slow_point.turbulence == "light"
+    # the cruise point's model is the single plant's: the same residual, scaled by the log's mean speed over its
+    # trim speed (the flight holds about its trim)
+    assert fast.sigma == pytest.approx(single.sigma, rel=0.02)
+    assert fast.time_constant == pytest.approx(single.time_constant, rel=0.02)
+    assert slow_point.sigma / fast.sigma == pytest.approx(1 / 0.7, rel=1e-4)
+    assert slow_point.time_constant / fast.time_constant == pytest.approx(1 / 0.7, rel=1e-4)
+    # the model and the place of each point are kept
+    assert np.array_equal(points["cruise"].A, load_plant(cruise).A)
+
+
+def main_cli(*argv: str) -> int:
+    from monitor.cli import main
+
+    return main(list(argv))

@@ -83,7 +83,9 @@ def register(subparsers) -> None:
         help="keep PLANT's model and measure only the air this log "
         "flew in: PLANT is written to --out with its [disturbance] table measured from this log (with "
         "--turbulence LEVEL, the level flown). Identify the dynamics in calm air, then the gust from a "
-        "flight in turbulence: a turbulent flight spoils the dynamics' fit",
+        "flight in turbulence: a turbulent flight spoils the dynamics' fit. PLANT may be an envelope: the gust is "
+        "measured with the point nearest where the log flew (a steady stretch: --window over a level leg) and "
+        "written into every point, scaled by its airspeed",
     )
     p.add_argument(
         "--actuator-limit",

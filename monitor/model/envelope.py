@@ -60,6 +60,7 @@ __all__ = [
     "MAX_SCHEDULE",
     "is_envelope",
     "load_envelope",
+    "envelope_with_air",
     "parse_envelope",
     "envelope_from_table",
     "envelope_toml",
@@ -443,6 +444,44 @@ def envelope_toml(
         lines += ["", "[[point]]", f"name = {_value(point)}", f"at = {_value({s: float(at[s]) for s in schedule})}"]
         lines += ["[point.plant]", *_table_lines(raw, "point.plant", 0)]
     return "\n".join(lines) + "\n"
+
+
+def envelope_with_air(
+    envelope: Envelope,
+    gust: Mapping[str, float],
+    measured_at: float | None,
+    turbulence: str | None,
+    source: str,
+) -> str:
+    """The envelope file's text with a ``[disturbance]`` table in every point: the gust measured once (at airspeed
+    ``measured_at``, m/s) carried to each point by its trim airspeed.
+
+    Why scale by airspeed: ``d`` is the gust seen as an angle of attack, ``w_g / V``, and its time scale is the
+    gust's length over the speed, ``L / V`` (the Dryden form the plant's Gauss-Markov ``d`` stands for), so one
+    air met at ``V_m`` is ``sigma V_m / V`` and ``time_constant V_m / V`` at a point flown at ``V``. A point whose
+    trim has no airspeed (or a ``measured_at`` of None) gets the gust as measured."""
+    points = []
+    for point in envelope.points:
+        plant = point.plant
+        if plant.raw is None:
+            raise UserError(f"{envelope.source}, point '{point.name}': not read from a file (no table to copy)")
+        speed = _trim_and_condition(plant.signals or {}).get("airspeed")
+        scaled = isinstance(speed, (int, float)) and _finite(speed) and speed > 0 and measured_at is not None
+        ratio = float(measured_at) / float(speed) if scaled else 1.0  # type: ignore[arg-type]
+        table: dict[str, Any] = {
+            "sigma": float(f"{gust['sigma'] * ratio:.6g}"),
+            "time_constant": float(f"{gust['time_constant'] * ratio:.6g}"),
+        }
+        if turbulence is not None:
+            table["turbulence"] = turbulence
+        table["source"] = source + (f"; scaled from {measured_at:.4g} to {speed:.4g} m/s" if scaled else "")
+        raw = {key: value for key, value in plant.raw.items() if key != "disturbance"}
+        raw["disturbance"] = table
+        points.append((point.name, point.at, raw))
+    header = [f"{envelope.name}: the air of {source}, measured by fault-monitor identify --air-only."]
+    text = envelope_toml(envelope.name, envelope.schedule, points, envelope.description, header)
+    parse_envelope(text, source=envelope.source)
+    return text
 
 
 def assemble_envelope(

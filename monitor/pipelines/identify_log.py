@@ -313,10 +313,16 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
 
     states = MODELS[req.model]
     kept = None
+    envelope = None
     if req.air_only is not None:  # the plant's own map reads the log, its model explains it
+        from monitor.model.envelope import is_envelope, load_envelope
         from monitor.model.plant import load_plant
 
-        kept = load_plant(req.air_only).physical
+        if is_envelope(req.air_only):  # the points share one map: the first reads the log
+            envelope = load_envelope(req.air_only)
+            kept = envelope.first.physical
+        else:
+            kept = load_plant(req.air_only).physical
         if kept.continuous is None or not kept.signals:
             raise UserError(
                 f"--air-only {req.air_only}: needs a continuous plant with a [signals] table (one written by identify)"
@@ -330,7 +336,10 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
             )
         )
         raise UserError(f"{req.log}: {dlog.layouts.no_map()}; the log has {hints}")
-    table, source = _signals_table(req.signals)
+    if kept is not None and kept.signals:  # the kept model's own map (an envelope's is in its points)
+        table, source = kept.signals, str(req.air_only)
+    else:
+        table, source = _signals_table(req.signals)
     smap, written = map_for(table, source, states, dlog.layouts if dlog is not None else None, req.known_inputs)
     h_read, ratio, tau_max = _periods(req, smap, dlog)
     h = h_read * ratio
@@ -374,6 +383,8 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
             )
     units = tuple(smap.measured[s].unit for s in states)  # the parsed map's: a derived signal's default unit too
     if kept is not None:
+        if envelope is not None:
+            return _measure_envelope_air(req, envelope, rows, k, X, U, states, sysid)
         return _measure_air(req, kept, k, X, U, states, sysid)
     if flight.records >= _LONG_LOG_RECORDS:
         say(
@@ -443,15 +454,13 @@ def _condition(rows: Rows, written: dict[str, Any]) -> dict[str, float]:
     return condition
 
 
-def _measure_air(req: IdentifyRequest, kept, k, X, U, states, sysid: int):
-    """``--air-only``: the kept plant's file, its ``[disturbance]`` measured from this log (``gust_from_residual``)."""
+def _gust(req: IdentifyRequest, kept, k, X, U, states) -> dict[str, float]:
+    """The gust this log met, seen through ``kept``'s model about its operating point (``gust_from_residual``)."""
     import numpy as np
 
     from monitor.errors import UserError
     from monitor.link.signals import parse_signals
     from monitor.model.identification import gust_from_residual
-    from monitor.model.plant import parse_plant
-    from monitor.model.plant_toml import disturbance_table
 
     smap = parse_signals(kept.signals, kept.source, len(states), kept.m)  # the kept plant's operating point
     gust = gust_from_residual(
@@ -459,6 +468,67 @@ def _measure_air(req: IdentifyRequest, kept, k, X, U, states, sysid: int):
     )
     if gust is None:
         raise UserError(f"{req.log}: too few consecutive samples (or no alpha) to measure the gust")
+    return gust
+
+
+STEADY_SHARE = 0.25  # --air-only ENVELOPE: the most a schedule variable may move over the log, of the points' span
+
+
+def _measure_envelope_air(req: IdentifyRequest, envelope, rows: Rows, k, X, U, states, sysid: int):
+    """``--air-only ENVELOPE``: the gust measured with the point nearest where the log was flown (the means of
+    the schedule's variables over it), written into every point scaled by its airspeed (``envelope_with_air``)."""
+    import numpy as np
+
+    from monitor.errors import UserError
+    from monitor.model.envelope import envelope_with_air
+    from monitor.model.flight_condition import schedule_value
+
+    where: dict[str, float] = {}
+    for name in envelope.schedule:
+        values = np.array([schedule_value(name, v) for _k, v in rows], dtype=float)
+        if not np.isfinite(values).any():
+            raise UserError(
+                f"{req.log}: no value of the schedule's {name!r} in the samples: the log must measure what the "
+                "envelope is scheduled on, to know which point's model explains it"
+            )
+        where[name] = float(np.nanmean(values))
+        low, high = np.nanpercentile(values, [5, 95])
+        span = float(np.ptp(envelope.at_matrix[:, envelope.schedule.index(name)]))
+        if span > 0 and high - low > STEADY_SHARE * span:
+            raise UserError(
+                f"{req.log}: the flight moves {name} from {low:.4g} to {high:.4g} (5th to 95th percentile; the "
+                f"points span {span:.4g}): the air is measured on a steady stretch, where one point's model explains "
+                "the flight: give --window START:END over one (a level leg)"
+            )
+    point = envelope.nearest(where)
+    gust = _gust(req, point.plant.physical, k, X, U, states)
+    speeds = [v["airspeed"] for _k, v in rows if math.isfinite(v.get("airspeed", math.nan))]
+    text = envelope_with_air(
+        envelope,
+        gust,
+        float(np.mean(speeds)) if speeds else None,
+        req.turbulence,
+        f"{Path(req.log).name}, sysid {sysid}, with point {point.name}",
+    )
+    _write_plant_text(Path(req.out), text)
+    return AirMeasured(req, sysid, gust, point=point.name, where=where)
+
+
+def _write_plant_text(out: Path, text: str) -> None:
+    from monitor.errors import UserError
+
+    try:
+        write_text_atomically(out, text)
+    except OSError as exc:
+        raise UserError(f"{out}: cannot write the plant file: {exc.strerror or exc}") from None
+
+
+def _measure_air(req: IdentifyRequest, kept, k, X, U, states, sysid: int):
+    """``--air-only``: the kept plant's file, its ``[disturbance]`` measured from this log (``gust_from_residual``)."""
+    from monitor.model.plant import parse_plant
+    from monitor.model.plant_toml import disturbance_table
+
+    gust = _gust(req, kept, k, X, U, states)
     assert req.air_only is not None  # kept is the --air-only plant
     text = Path(req.air_only).read_text("utf-8")
     kept_lines, skipping = [], False
@@ -471,10 +541,7 @@ def _measure_air(req: IdentifyRequest, kept, k, X, U, states, sysid: int):
     text = "\n".join(kept_lines).rstrip() + "\n\n" + "\n".join(table) + "\n"
     out = Path(req.out)
     parse_plant(text, source=str(out))
-    try:
-        write_text_atomically(out, text)
-    except OSError as exc:
-        raise UserError(f"{out}: cannot write the plant file: {exc.strerror or exc}") from None
+    _write_plant_text(out, text)
     return AirMeasured(req, sysid, gust)
 
 
@@ -485,10 +552,16 @@ class AirMeasured:
     request: IdentifyRequest
     sysid: int
     gust: dict[str, float]
+    point: str | None = None  # an envelope's: the point whose model measured it
+    where: dict[str, float] | None = None  # an envelope's: the schedule's means over the log
 
     @property
     def summary(self) -> str:
-        return f"gust sigma {self.gust['sigma']:.4g} deg, time constant {self.gust['time_constant']:.3g} s"
+        line = f"gust sigma {self.gust['sigma']:.4g} deg, time constant {self.gust['time_constant']:.3g} s"
+        if self.point is not None and self.where is not None:
+            place = ", ".join(f"{name} {value:.4g}" for name, value in self.where.items())
+            line += f" (with point {self.point}, nearest the flight's mean {place}; every point's scaled by airspeed)"
+        return line
 
     def report(self) -> dict[str, Any]:
         return {
@@ -498,6 +571,7 @@ class AirMeasured:
             "kept_model": str(self.request.air_only),
             "disturbance": self.gust,
             "turbulence": self.request.turbulence,
+            **({"point": self.point, "where": self.where} if self.point is not None else {}),
         }
 
 
