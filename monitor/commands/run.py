@@ -134,6 +134,16 @@ def add_alarm_arguments(group) -> None:
         "(light, moderate, severe at 3000 ft; needs the plant's [disturbance] table)",
     )
     group.add_argument(
+        "--calibration-log",
+        action="append",
+        default=None,
+        metavar="LOG",
+        help="with --alarm-threshold auto --turbulence LEVEL: a fault-free flight log in that turbulence (tlog, "
+        "DataFlash or ULog; repeat for several), read by the same estimator; the threshold is raised to where "
+        "the tail of its crossings puts the budget when the Gaussian prediction's tail is too thin. Tens of "
+        "minutes of flight; the level flown must be LEVEL",
+    )
+    group.add_argument(
         "--alarm-clear",
         type=float,
         default=None,
@@ -154,6 +164,14 @@ def alarm_from_args(args: argparse.Namespace, fleet=None):
 
     threshold = args.alarm_threshold
     turbulence = getattr(args, "turbulence", None)
+    calibration_logs = getattr(args, "calibration_log", None) or []
+    if calibration_logs and (threshold != "auto" or turbulence is None):
+        raise UserError("--calibration-log applies to --alarm-threshold auto --turbulence LEVEL only")
+    from pathlib import Path
+
+    for path in calibration_logs:  # before any work: a typo is one line, not a line after a minute of reading
+        if not Path(path).is_file():
+            raise UserError(f"--calibration-log {path}: no such log file")
     if threshold == "auto" and turbulence is not None:
         if args.disturbance_bound is not None:
             raise UserError(
@@ -171,11 +189,17 @@ def alarm_from_args(args: argparse.Namespace, fleet=None):
             for m in models
         )
         logging.getLogger("monitor.alarm").info(
-            "alarm threshold auto: %.4g, crossed about once per flight hour in %s turbulence (fault-monitor "
-            "detectability)",
+            "alarm threshold auto: %.4g, crossed about once per flight hour in %s turbulence by a Gaussian f_hat "
+            "(fault-monitor detectability)%s",
             threshold,
             turbulence,
+            "" if calibration_logs else "; flights cross it more often (heavier tails): --calibration-log checks it",
         )
+        if calibration_logs:
+            from monitor.checks import FALSE_ALARMS_PER_HOUR
+            from monitor.commands.alarm_calibration import calibrate_on_logs
+
+            threshold, _calibration = calibrate_on_logs(calibration_logs, fleet, threshold, FALSE_ALARMS_PER_HOUR)
     elif threshold == "auto":
         if args.disturbance_bound is None:
             raise UserError(
