@@ -112,7 +112,7 @@ class _Daemon:
             self.sim.run_until(t)
             for cmd in commands:
                 outcome = self.sim.receive_command(cmd.k, cmd.elevator_deg, t)
-                log.debug("command k=%d u=%.4f at t=%.4f: %s", cmd.k, cmd.elevator_deg, t, outcome)
+                log.debug("command k=%d u=%r at t=%.4f: %s", cmd.k, cmd.elevator_deg, t, outcome)
             self.wake.set()
         except FlightModelError as exc:  # the aircraft crashed while the command was being brought up to time
             self.failure = exc

@@ -30,12 +30,14 @@ ITEMS = [
 ]
 
 
+@pytest.mark.parametrize("member", [None, "ground-a", 'odd "name"'])
 @pytest.mark.parametrize("item", ITEMS)
-def test_estimate_json_is_json_dumps_of_the_payload(item) -> None:
-    text = estimate_json(item, "deg")
-    expected = json.dumps(estimate_payload(item, "deg"), allow_nan=False)
+def test_estimate_json_is_json_dumps_of_the_payload(item, member) -> None:
+    text = estimate_json(item, "deg", member)
+    expected = json.dumps(estimate_payload(item, "deg", member), allow_nan=False)
     assert json.loads(text) == json.loads(expected)
     assert list(json.loads(text)) == list(json.loads(expected))  # the same keys in the same order
+    assert json.loads(text).get("member") == member  # a group member names itself; a lone monitor adds no key
 
 
 def test_a_non_finite_time_is_refused_as_json_dumps_refuses_it() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 
 from monitor.checks import AUTO_MARGIN  # a constant of the light package module (no numpy at --help)
 from monitor.wire import TURBULENCE_LEVELS
@@ -332,6 +333,19 @@ def register(subparsers) -> None:
         help="do not subscribe to <prefix>/*/truth (the simulator's ground truth, recorded beside f_hat)",
     )
     add_alarm_arguments(out)
+    group = p.add_argument_group("monitor group")
+    group.add_argument(
+        "--group",
+        metavar="NAME",
+        help="join the monitor group NAME: several monitors (processes or machines) that all receive the fleet's "
+        "telemetry (a router with one output per member) and share one Zenoh network. Each vehicle is answered "
+        "(command, ground-station feedback, Zenoh estimate and alarm) by one member, chosen by rendezvous hashing "
+        "of its system id over the live members; the others step its estimator on the same samples and stay "
+        "silent, so that one takes over, f_hat going on without a reset, within 0.35 s of a member's last beat "
+        "when it dies or hangs (liveliness <prefix>/monitor/group/NAME/<name>, beats every 0.1 s on "
+        ".../<name>/beat). Members need distinct --name values. Estimates then name the member that answered "
+        '("member"), and the recording marks each sample group/served. See the fleets guide',
+    )
     out.add_argument(
         "--vehicle-timeout",
         type=float,
@@ -351,6 +365,9 @@ def register(subparsers) -> None:
 
     add_zenoh_arguments(p)
     p.set_defaults(func=run)
+
+
+_KEY_CHUNK = re.compile(r"[A-Za-z0-9_.-]+")
 
 
 def _free_tcp_port() -> int:
@@ -386,6 +403,11 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--queue must be at least 1")
     if not 0 <= args.assembly_wait < 10:
         raise UserError("--assembly-wait must be between 0 and 10 seconds")
+    name = args.name or default_name()
+    if args.group is not None:
+        for flag, value in (("--group", args.group), ("--name", name)):
+            if not _KEY_CHUNK.fullmatch(value):
+                raise UserError(f"{flag} '{value}': use letters, digits, '-', '_' and '.' only (it is a Zenoh key)")
     connections = [parse_connection(c) for c in (args.mavlink or ["udpin:127.0.0.1:14550"])]
     live_urls, viewer = _live_viewers(args)
     fleet = load_models(args)
@@ -415,11 +437,13 @@ def run(args: argparse.Namespace) -> int:
         properties.update(model_properties(default, str(args.gains)))
     if args.fleet:
         properties["fleet"] = str(args.fleet)
+    if args.group is not None:
+        properties.update(group=args.group, member=name)
     config = MonitorConfig(
         fleet=fleet,
         connections=connections,
         prefix=args.key_prefix,
-        name=args.name or default_name(),
+        name=name,
         rrd=args.rrd,
         rrd_properties=properties,
         signing_key=key,
@@ -434,5 +458,6 @@ def run(args: argparse.Namespace) -> int:
         zenoh_endpoints=endpoints,
         live_urls=live_urls,
         spawn_viewer=viewer,
+        group=args.group,
     )
     return run_daemon(config, config_from_args(args))

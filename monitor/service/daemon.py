@@ -27,7 +27,7 @@ import socket
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from monitor.link.signing import Signer
 from monitor.link.transports import ConnectionSpec, Link, UdpLink, open_link
@@ -36,6 +36,9 @@ from monitor.service.fleet_file import Fleet
 from monitor.service.pipeline import Pipeline
 from monitor.service.records import TruthRecord
 from monitor.service.vehicles import VehicleTable
+
+if TYPE_CHECKING:
+    from monitor.service.group_link import GroupLink  # imported where a group is joined: it imports zenoh
 
 __all__ = ["MonitorConfig", "build_pipeline", "run_daemon", "default_name"]
 
@@ -71,6 +74,7 @@ class MonitorConfig:
     zenoh_endpoints: str = ""
     poll_s: float = 0.005
     live_urls: list[str] = field(default_factory=list)  # live Rerun viewers' gRPC addresses (--rerun-url)
+    group: str | None = None  # a monitor group's name (--group): each vehicle answered by one member
     spawn_viewer: str | None = None  # the `rerun` executable to start a local viewer with (--rerun-spawn)
 
 
@@ -203,7 +207,7 @@ class _Timers:
                 handle.cancel()
 
 
-async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
+async def _serve(config: MonitorConfig, pipeline: Pipeline, group: GroupLink | None = None) -> None:
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -220,18 +224,23 @@ async def _serve(config: MonitorConfig, pipeline: Pipeline) -> None:
             links.append(link)
         mode = "compensation only" if config.compensate else "observe-only" if config.observe else "closed loop"
         log.info(
-            "ready: %s; MAVLink %s; Zenoh %s, key prefix '%s', name '%s'%s%s",
+            "ready: %s; MAVLink %s; Zenoh %s, key prefix '%s', name '%s'%s%s%s",
             mode,
             ", ".join(link.local for link in links),
             config.zenoh_endpoints or "(config file)",
             config.prefix,
             config.name,
+            f", group '{config.group}'" if config.group else "",
             _recording_outputs(config),
             _operating_points(config),
         )
         timers.start()
+        if group is not None:
+            group.start(loop)
         await stop.wait()
     finally:
+        if group is not None:
+            group.stop()
         timers.cancel()
         for link in links:
             link.close()
@@ -249,7 +258,7 @@ def run_daemon(config: MonitorConfig, zenoh_config) -> int:
     # a datagram waits behind them (Python's default 5 ms would be a quarter of a 50 Hz sample period)
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     session = open_session(zenoh_config)
-    publisher = truth_sub = recorder = None
+    publisher = truth_sub = recorder = group = None
     try:
         config.live_urls = _live_urls(config)
         if config.rrd or config.live_urls:
@@ -258,18 +267,31 @@ def run_daemon(config: MonitorConfig, zenoh_config) -> int:
             recorder = RrdRecorder(config.rrd, properties=config.rrd_properties, live=config.live_urls)
         units = {m.plant.unit for m in config.fleet.models()}
         publisher = EstimatePublisher(
-            session, config.prefix, config.name, unit=next(iter(units), "deg"), queue_max=config.queue_max
+            session,
+            config.prefix,
+            config.name,
+            unit=next(iter(units), "deg"),
+            queue_max=config.queue_max,
+            member=config.name if config.group else None,
         )
         pipeline = build_pipeline(config, publisher, recorder)
+        if config.group:
+            from monitor.service.group import GroupView
+            from monitor.service.group_link import GroupLink
+
+            pipeline.group = GroupView(config.name, config.prefix, now=time.monotonic())
+            group = GroupLink(session, config.prefix, config.group, pipeline.group, pipeline.table)
         if config.truth and recorder is not None:
             rec = recorder
             truth_sub = session.declare_subscriber(
                 f"{config.prefix.rstrip('/')}/*/truth", lambda sample: _on_truth(rec, sample.payload.to_bytes())
             )
-        asyncio.run(_serve(config, pipeline))
+        asyncio.run(_serve(config, pipeline, group))
         log.info("stopped: %s", pipeline.summary())
     finally:
         close_quietly(None, truth_sub)  # no truth callback may reach a closed recorder
+        if group is not None:
+            close_quietly(None, *group.close())
         entities: list[Any] = publisher.close() if publisher is not None else []
         if recorder is not None:
             recorder.close()

@@ -35,6 +35,7 @@ from monitor.link.dialect import MessageLayout, layout_by_name, mavlink
 from monitor.link.frames import FrameCounters, RawFrame
 from monitor.link.outgoing import alarm_text_frame, command_frame, fhat_frames
 from monitor.link.transports import Read
+from monitor.service.group import GroupView
 from monitor.service.records import SampleRecord
 from monitor.service.vehicles import Processed, Vehicle, VehicleTable, answer_within
 
@@ -109,6 +110,10 @@ class Pipeline:
         self.processing_s: deque[float] = deque(maxlen=100_000)
         self.commands_sent = 0
         self.feedback_sent = 0
+        # a monitor group (``run --group``): asked per processed sample whether this member answers it; None: alone
+        self.group: GroupView | None = None
+        self.served = 0  # samples this member answered (a group member: the rest it only kept warm)
+        self.kept_warm = 0
         self.warned_v1 = False
         self.round_ns = int(ROUND_S * 1e9)
         self.overloaded = False  # in an overload episode (shedding; one WARNING at its start)
@@ -310,6 +315,16 @@ class Pipeline:
             return
         r = p.result
         route = sample.route
+        # a group member steps every vehicle's estimator (above) and answers only the vehicles it owns: a warm
+        # member's outputs are gated here and nowhere else
+        serving = self.group is None or self.group.serves(vehicle.sysid, now)
+        if not serving:
+            self.kept_warm += 1
+            if self.publisher is not None:
+                self.publisher.latest.pop(vehicle.sysid, None)  # its status is the owner's to answer
+            route = None
+        elif self.group is not None:
+            self.served += 1
         if route is not None:
             # the command first, the ground-station feedback after it, in ONE write: a syscall saved per
             # sample, and MAVLink peers read several frames per datagram as they do on a stream
@@ -330,7 +345,7 @@ class Pipeline:
             if out:
                 link.send(out, peer)
         raised = vehicle.alarm.raised
-        if self.publisher is not None:
+        if self.publisher is not None and serving:
             env = vehicle.model.envelope
             self.publisher.estimate(
                 (
@@ -362,10 +377,10 @@ class Pipeline:
         processing = (time.perf_counter_ns() - t0_ns) * 1e-9
         self.processing_s.append(processing)
         if self.recorder is not None:
-            self.recorder.submit(self._record(p, wall, processing))
+            self.recorder.submit(self._record(p, wall, processing, None if self.group is None else serving))
 
     @staticmethod
-    def _record(p: Processed, wall: float, processing: float) -> SampleRecord:
+    def _record(p: Processed, wall: float, processing: float, served: bool | None = None) -> SampleRecord:
         r, values = p.result, p.sample.values
         sig = p.vehicle.model.signals
         elevator = values.get(sig.actuator[0]) if sig.actuator else None
@@ -389,6 +404,7 @@ class Pipeline:
             point=p.point,
             inside=p.inside,
             shed=p.vehicle.shed,
+            served=served,
         )
 
     # --- housekeeping and reporting -----------------------------------------------------------------
@@ -414,6 +430,8 @@ class Pipeline:
             "commands": self.commands_sent,
             "feedback": self.feedback_sent,
         }
+        if self.group is not None:
+            out.update(served=self.served, kept_warm=self.kept_warm, stalls=self.group.stalls)
         if self.publisher is not None:
             out.update(published=self.publisher.published, publish_drops=self.publisher.dropped)
         if not self.scheduled:  # only an envelope has an identified range to be outside of
@@ -459,6 +477,9 @@ class Pipeline:
             "resets",
             "commands",
             "feedback",
+            "served",
+            "kept_warm",
+            "stalls",
             "published",
             "publish_drops",
         )

@@ -43,13 +43,14 @@ def _finite(values) -> list[float | None]:
     return [v if math.isfinite(v) else None for v in map(float, values)]
 
 
-def estimate_payload(item: EstimateItem, unit: str) -> dict[str, Any]:
+def estimate_payload(item: EstimateItem, unit: str, member: str | None = None) -> dict[str, Any]:
     """The contract's ``fault/estimate`` payload (plant units; ``tau`` = observed delay in seconds or null).
 
     Beyond the contract: ``command_applied`` (did the previous command act, per the vehicle's actuator
     report; null when it cannot be told) and ``commands_effective`` (false while most recent ones did not); for
     an envelope model only, ``point`` (the name of the point that estimated the sample) and ``in_envelope``
-    (false while the schedule's values are outside the identified range: the alarm is paused).
+    (false while the schedule's values are outside the identified range: the alarm is paused); for a member of a
+    monitor group only (``run --group``), ``member`` (the name of the member that answered the sample).
     """
     sysid, k, t, f_hat, x_hat, residual, u, tau, alarm, applied, effective = item[:11]
     envelope = item[11] if len(item) > 11 else None
@@ -69,6 +70,8 @@ def estimate_payload(item: EstimateItem, unit: str) -> dict[str, Any]:
     }
     if envelope is not None:
         payload["point"], payload["in_envelope"] = envelope
+    if member is not None:
+        payload["member"] = member
     return payload
 
 
@@ -84,16 +87,17 @@ def _json_numbers(values) -> str:
 _JSON_LITERAL = {True: "true", False: "false", None: "null"}
 
 
-def estimate_json(item: EstimateItem, unit: str) -> str:
-    """``json.dumps(estimate_payload(item, unit))``, the same keys in the same order, at a third of the cost (the
-    loop formats one per answered sample; tested equal, NaN and infinities included)."""
+def estimate_json(item: EstimateItem, unit: str, member: str | None = None) -> str:
+    """``json.dumps(estimate_payload(item, unit, member))``, the same keys in the same order, at a third of the cost
+    (the loop formats one per answered sample; tested equal, NaN and infinities included)."""
     sysid, k, t, f_hat, x_hat, residual, u, tau, alarm, applied, effective = item[:11]
     envelope = item[11] if len(item) > 11 else None
     tail = (
-        f',"point":{json.dumps(envelope[0])},"in_envelope":{_JSON_LITERAL[bool(envelope[1])]}}}'
+        f',"point":{json.dumps(envelope[0])},"in_envelope":{_JSON_LITERAL[bool(envelope[1])]}'
         if envelope is not None
-        else "}"
+        else ""
     )
+    tail += f',"member":{json.dumps(member)}}}' if member is not None else "}"
     return (
         f'{{"sysid":{int(sysid)},"k":{int(k)},"t":{_json_float(t)},"f_hat":{_json_numbers(f_hat)},'
         f'"x_hat":{_json_numbers(x_hat)},"residual":{_json_numbers(residual)},"u":{_json_numbers(u)},'
@@ -125,8 +129,10 @@ class EstimatePublisher:
         name: str,
         unit: str = "deg",
         queue_max: int = 10_000,
+        member: str | None = None,
     ) -> None:
         self.session = session
+        self.member = member  # a monitor group's member: named in every payload (the member that answered)
         self.prefix = prefix.rstrip("/")
         self.unit = unit
         self.queue_max = queue_max
@@ -155,13 +161,13 @@ class EstimatePublisher:
         if not self._round:
             return
         items, self._round = self._round, []
-        queue, unit, prefix = self._queue, self.unit, self.prefix
+        queue, unit, prefix, member = self._queue, self.unit, self.prefix, self.member
         for item in items:
             if len(queue) >= self.queue_max:
                 self._drop()
                 continue
             try:
-                queue.append((f"{prefix}/{item[0]}/fault/estimate", estimate_json(item, unit)))
+                queue.append((f"{prefix}/{item[0]}/fault/estimate", estimate_json(item, unit, member)))
             except ValueError as exc:  # a non-finite time: not JSON; costs this estimate, not the loop
                 log.debug("estimate not published: %s", exc)
         self._wake.set()
@@ -211,7 +217,7 @@ class EstimatePublisher:
             for sysid, item in list(self.latest.items()):
                 key = f"{self.prefix}/{sysid}/fault/status"
                 if wanted.intersects(zenoh.KeyExpr(key)):
-                    payload = {**estimate_payload(item, self.unit), **self.status_extra}
+                    payload = {**estimate_payload(item, self.unit, self.member), **self.status_extra}
                     query.reply(key, json.dumps(payload, allow_nan=False), encoding=_JSON)
         except Exception as exc:
             log.debug("status query failed: %s", exc)

@@ -171,7 +171,8 @@ def _column(chunk: Any, field: str, index: int | None, scale: float) -> _Column 
     return _Column(field, index, k, t, wall, values[present] / scale)
 
 
-_OPTIONAL = {"elevator", "tau_obs", "tau", "point", "inside"}  # None when not recorded; other missing scalars NaN
+# None when not recorded; other missing scalars NaN
+_OPTIONAL = {"elevator", "tau_obs", "tau", "point", "inside", "served"}
 
 
 def _assemble(cls: type, sysid: int, columns: list[_Column]) -> list[Any]:
@@ -208,7 +209,7 @@ def _assemble(cls: type, sysid: int, columns: list[_Column]) -> list[Any]:
             per_row[name] = [int(v) if h else 0 for v, h in zip(values.tolist(), has.tolist(), strict=True)]
         elif name == "point":
             per_row[name] = [int(round(v)) if h else None for v, h in zip(values.tolist(), has.tolist(), strict=True)]
-        elif name == "inside":
+        elif name in ("inside", "served"):
             per_row[name] = [bool(v >= 0.5) if h else None for v, h in zip(values.tolist(), has.tolist(), strict=True)]
         elif name in _OPTIONAL:
             per_row[name] = [v if h else None for v, h in zip(values.tolist(), has.tolist(), strict=True)]

@@ -42,6 +42,7 @@ class SampleRecord:
     point: int | None = None  # an envelope model: the index of the point that estimated the sample (None: one point)
     inside: bool | None = None  # ... and whether its schedule values were inside the identified range
     shed: int = 0  # the vehicle's samples shed so far under overload (not answered; lost samples to the estimator)
+    served: bool | None = None  # a monitor group: did this member answer the sample (False: kept warm); None: alone
 
 
 @dataclass

@@ -64,6 +64,7 @@ SAMPLE_SCALARS: dict[str, tuple[str, float]] = {
     "run": ("run", 1.0),
     "point": ("envelope/point", 1.0),  # envelope models only: a single-point model's rows leave them out
     "inside": ("envelope/inside", 1.0),
+    "served": ("group/served", 1.0),  # a monitor group only: 1 answered by this member, 0 kept warm
 }
 SAMPLE_VECTORS: dict[str, str] = {
     "y": "measured/y",

@@ -24,9 +24,12 @@ def _mavproxy_script() -> str:
 
 
 class MavProxy(Daemon):
-    """Headless MAVProxy routing ``master`` (where the vehicle sends) to the monitor, writing a tlog."""
+    """Headless MAVProxy routing ``master`` (where the vehicle sends) to the monitor (``out``, and ``more_outs`` for
+    a monitor group: every output gets every message), writing a tlog."""
 
-    def __init__(self, tmp_path: Path, master: int, out: int, out_kind: str = "udpout") -> None:
+    def __init__(
+        self, tmp_path: Path, master: int, out: int, out_kind: str = "udpout", more_outs: tuple[int, ...] = ()
+    ) -> None:
         super().__init__("x", [], tmp_path / "mavproxy.log")
         self.tlog = tmp_path / "mavproxy.tlog"
         self.master = master
@@ -34,7 +37,7 @@ class MavProxy(Daemon):
             sys.executable,
             _mavproxy_script(),
             f"--master=udpin:127.0.0.1:{master}",
-            f"--out={out_kind}:127.0.0.1:{out}",
+            *(f"--out={out_kind}:127.0.0.1:{port}" for port in (out, *more_outs)),  # one output per monitor
             "--daemon",
             "--mav20",
             "--dialect=ardupilotmega",
