@@ -273,3 +273,11 @@ def test_names_are_one_key_chunk(name: str) -> None:
     from monitor.service.group_link import group_base
 
     assert group_base("uav/", name) == f"uav/monitor/group/{name}"
+
+
+@pytest.mark.parametrize("flags", [["--group", "a/b"], ["--group", "ok", "--name", "x*"]])
+def test_a_group_or_member_name_that_is_no_key_chunk_is_one_line(gains_path: Path, flags: list[str]) -> None:
+    base = [sys.executable, "-m", "monitor", "run", "--plant", "paper-continuous", "--gains", str(gains_path)]
+    result = subprocess.run([*base, *flags], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert "Zenoh key" in result.stderr

@@ -325,7 +325,11 @@ def register(subparsers) -> None:
         help="start a local Rerun viewer (the 'rerun' executable, port 9876 on loopback; or use the one "
         "already there) and stream to it as --rerun-url does",
     )
-    out.add_argument("--name", help="monitor name in the liveliness key <prefix>/monitor/<name> (default: host-pid)")
+    out.add_argument(
+        "--name",
+        help="monitor name in the liveliness key <prefix>/monitor/<name>, and with --group the member's name "
+        "(default: host-pid)",
+    )
     out.add_argument(
         "--no-truth",
         dest="truth",

@@ -16,7 +16,8 @@ def register(subparsers) -> None:
         "subscribe",
         help="print live fault estimates from Zenoh as JSON lines",
         description="Print every sample on KEYEXPR as one JSON line on stdout until SIGINT/SIGTERM, --count or "
-        "--duration. Connect to a monitor (peer) or a router with --zenoh-connect.",
+        "--duration. Connect to a monitor (peer) or a router with --zenoh-connect. The estimates of a monitor group "
+        '(run --group) come from the member that answered each sample and name it ("member").',
     )
     p.add_argument(
         "keyexpr",
