@@ -216,6 +216,8 @@ async def _serve(config: MonitorConfig, pipeline: Pipeline, group: GroupLink | N
     links: list[Link] = []
     timers = _Timers(loop, config, pipeline, links)
     try:
+        if group is not None:  # listening to the group before the first sample can be asked whether to answer it
+            group.start(loop)
         for i, spec in enumerate(config.connections):
             link = open_link(spec, i, timers.on_reads, pipeline.frames, signer)
             if isinstance(link, UdpLink):
@@ -235,8 +237,6 @@ async def _serve(config: MonitorConfig, pipeline: Pipeline, group: GroupLink | N
             _operating_points(config),
         )
         timers.start()
-        if group is not None:
-            group.start(loop)
         await stop.wait()
     finally:
         if group is not None:
