@@ -5,6 +5,7 @@ On a companion computer in the aircraft an idle monitor's CPU is battery. This s
 * a bare Zenoh peer (the session alone, configured as the monitor's: loopback, no scouting): the floor;
 * ``fault-monitor run`` with no vehicle (a UDP link nobody sends to);
 * the same with ``--rrd`` (the recorder's writer thread);
+* the same as a lone member of a monitor group (``--group``: a beat every 0.1 s);
 
 and for each reads the process's user + system CPU time from ``/proc/<pid>/stat`` at the start and the end
 of a ``--seconds`` window (20 s) that begins once it is ready, as a percentage of one core. Target: under 1 %
@@ -80,10 +81,12 @@ def main() -> None:
         "bare Zenoh peer": ([sys.executable, "-c", PEER, str(args.seconds + 30)], "ready"),
         "fault-monitor run, no vehicle": (monitor, "ready:"),
         "fault-monitor run --rrd, no vehicle": (monitor + ["--rrd", str(workdir / "idle.rrd")], "ready:"),
+        # a group member beats every 0.1 s from its loop (its only periodic work beyond the 1 Hz housekeeping)
+        "fault-monitor run --group, no vehicle": (monitor + ["--group", "idle", "--name", "m1"], "ready:"),
     }
     print(f"idle CPU over {args.seconds:.0f} s (user + system, % of one core; the machine may be shared):")
     for i, (what, (cmd, ready)) in enumerate(runs.items()):
-        if cmd is monitor or "--rrd" in cmd:
+        if cmd[0] == sys.executable and "monitor" in cmd[:3]:
             cmd = [*cmd, "--mavlink", f"udpin:127.0.0.1:{_free_udp_port()}"]
         percent = measure(cmd, workdir / f"idle-{i}.log", args.seconds, ready)
         print(f"  {what:38s} {percent:5.2f} %   (target for the monitor: < 1 %)")
