@@ -81,6 +81,7 @@ def plant_toml(
     model: str,
     header: list[str] | None = None,
     condition: dict[str, float] | None = None,
+    known_lags: dict[str, float] | None = None,
 ) -> str:
     """The plant file ``fault-monitor design`` / ``run`` take as it is (docs/reference/file-formats.md).
 
@@ -166,4 +167,12 @@ def plant_toml(
         lines += [
             f"{_key(name)} = {_value([_round(float(v)) for v in result.B_c[:, 1 + i]])}" for i, name in enumerate(known)
         ]
+        if known_lags:
+            lines += [
+                "",
+                "[known_inputs.lag]",
+                "# each one's first-order lag (s) before its column acts, picked by the held-out fit (an engine's",
+                "# thrust follows the lever in about a second)",
+            ]
+            lines += [f"{_key(name)} = {_value(float(known_lags[name]))}" for name in known if name in known_lags]
     return "\n".join(lines) + "\n"

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import logging
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -80,6 +80,11 @@ class EnvelopeModel:
     u0_rows: np.ndarray
     # each linear known input's trim (the points' [signals] condition), one value per point: interpolated too
     input_trim_rows: dict[str, np.ndarray]
+    # ... and its column (state units per signal unit), one row per point: interpolated with the same weights,
+    # because the throttle's pitching moment changes fast with the speed (on c172p its sign flips between 65 and
+    # 100 kt, as the trimmed elevator it is felt through crosses zero): the nearest point's column alone was off
+    # by its whole change between two points in a slow-down
+    input_column_rows: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -221,6 +226,10 @@ def load_envelope_model(
         np.array([m.signals.y0 for m in points], dtype=float),
         np.array([m.signals.u0 for m in points], dtype=float),
         _input_trims(envelope.name, points),
+        {
+            name: np.array([m.plant.known_inputs.linear[name] for m in points if m.plant.known_inputs is not None])
+            for name in (points[0].plant.known_inputs.linear if points[0].plant.known_inputs is not None else {})
+        },
     )
     first = points[0]
     return VehicleModel(first.plant, first.gains, first.estimator, first.signals, scheduled)

@@ -46,6 +46,7 @@ import numpy as np
 from monitor.link.assembly import AssembledSample, AssemblyCounters, SampleAssembler
 from monitor.model.estimator import EstimatorState, StepResult
 from monitor.model.flight_condition import needed_signals, schedule_value
+from monitor.model.known_inputs import lag_factor
 from monitor.model.scheduling import choose_point, outside_variables, rebase, trim_weights
 from monitor.service.alarm import Alarm, AlarmConfig
 from monitor.service.delay import DelayTracker
@@ -70,6 +71,29 @@ def answer_within(model: VehicleModel) -> float:
     may be in flight up to its ``tau_max``)."""
     plant = model.plant
     return ANSWER_WITHIN * (plant.tau_max if plant.lags is not None else plant.h)
+
+
+def _lagged_inputs(
+    vehicle: Vehicle, lag: dict[str, float], values: dict[str, float], k: int, h: float
+) -> dict[str, float]:
+    """``values`` with each lagged known input replaced by its first-order lag (``[known_inputs.lag]``), stepped
+    over the samples since the last one (a lost sample is a longer step); restarted at the first sample, after a
+    vehicle restart (``k`` going back) and where a value was missing."""
+    before: dict[str, float] = {}
+    steps = 0
+    if vehicle.input_lagged is not None and k > vehicle.input_lagged[0]:
+        steps, before = k - vehicle.input_lagged[0], vehicle.input_lagged[1]
+    state: dict[str, float] = {}
+    out = dict(values)
+    for name, seconds in lag.items():
+        value = values.get(name, math.nan)
+        if not math.isfinite(value):
+            continue
+        last = before.get(name)
+        state[name] = value if last is None else last + lag_factor(seconds, steps * h) * (value - last)
+        out[name] = state[name]
+    vehicle.input_lagged = (k, state)
+    return out
 
 
 class Vehicle:
@@ -110,6 +134,8 @@ class Vehicle:
         "switches",
         "trim",
         "input_trim",
+        "input_columns",
+        "input_lagged",
         "shed",
         "shed_run",
         "deadline_ns",
@@ -161,6 +187,9 @@ class Vehicle:
         # origin (None before the first sample)
         self.trim: tuple[np.ndarray, tuple[float, ...], tuple[float, ...]] | None = None
         self.input_trim: dict[str, float] | None = None  # ... and the linear known inputs' trims
+        self.input_columns: dict[str, np.ndarray] | None = None  # ... and their columns, interpolated too
+        # the lagged known inputs ([known_inputs.lag]): {signal: value} and the sample they were last stepped at
+        self.input_lagged: tuple[int, dict[str, float]] | None = None
         self.shed = 0  # samples not answered under overload (a newer one came first, or it grew too old)
         self.shed_run = 0  # ... since its last answered sample
         # how old a sample may be when its answer goes out: within its sample period (the contract's "late" is
@@ -430,7 +459,13 @@ class VehicleTable:
         y, u_report = sig.deviations(values, y0, u0)
         est = model.estimator
         ki = est.plant.known_inputs  # [known_inputs]: the turn's terms from the sample's values (None: without)
-        known = ki.vector(values, vehicle.input_trim) if ki is not None else None
+        known = None
+        if ki is not None:
+            known = ki.vector(
+                _lagged_inputs(vehicle, ki.lag, values, sample.k, model.plant.h) if ki.lag else values,
+                vehicle.input_trim,
+                vehicle.input_columns,
+            )
         applied = None
         compensation: list[float] | None = None
         if self.observe:
@@ -503,6 +538,7 @@ class VehicleTable:
                     vehicle.last_command = [c + a - b for c, a, b in zip(vehicle.last_command, old, new, strict=True)]
             vehicle.trim = trim
             vehicle.input_trim = {name: float(weights @ rows) for name, rows in env.input_trim_rows.items()}
+            vehicle.input_columns = {name: weights @ rows for name, rows in env.input_column_rows.items()}
         if previous is not None and point != previous:
             vehicle.switches += 1
             log.info(
