@@ -10,11 +10,12 @@ import sys
 from collections import Counter
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from monitor.service.alarm import AlarmConfig
 from monitor.service.fleet_file import Fleet, load_model
-from monitor.service.group import BEAT_S, GRACE_S, SETTLE_S, SILENCE_S, GroupView, owner, weight
+from monitor.service.group import BEAT_S, GRACE_S, SETTLE_S, SILENCE_S, GroupView, owner, state_digest, weight
 from monitor.service.group_state import export_state, import_state
 from monitor.service.vehicles import VehicleTable
 from tests.vehicle_table import feed
@@ -188,7 +189,8 @@ def test_a_stalled_member_answers_nothing_until_it_copied_the_owners_state() -> 
         assert not view.serves(sysid, now)
     assert view.sync_plan(now) == {sysid: "b"}
     view.adopted(sysid)
-    assert view.serves(sysid, now) and view.beat_payload() == {"warm": [sysid], "cold": []}
+    payload = view.beat_payload(now)
+    assert view.serves(sysid, now) and (payload["warm"], payload["cold"]) == ([sysid], [])
     assert view.stalls == 1
 
 
@@ -224,7 +226,42 @@ def test_expired_vehicles_are_forgotten() -> None:
     view.see(3, 1.0)
     view.see(4, 1.0)
     view.forget([4])
-    assert view.beat_payload() == {"warm": [4], "cold": []}
+    payload = view.beat_payload(1.0)
+    assert (payload["warm"], payload["cold"], payload["steps"]) == ([4], [], {})
+
+
+class _State:
+    """An estimator state as the digest sees it."""
+
+    def __init__(self, z: list[float], f_reported: list[float] | None = None) -> None:
+        self.z = np.array(z)
+        self.f_reported = f_reported
+
+
+def test_a_warm_member_out_of_step_with_the_owner_turns_cold_and_copies_it() -> None:
+    """The owner's beat carries its last step (k, digest); a warm member that stepped the same k to another state
+    (one of them shed that sample) is cold until it copied the owner's state, and then compares equal again."""
+    members = ["a", "b"]
+    sysid = _sysid_owned_by("b", members)
+    owner_view, warm_view = _settled_view("b", ["a"]), _settled_view("a", ["b"])
+    _run(owner_view, {"a": []}, 1.0)
+    _run(warm_view, {"b": []}, 1.0)
+    assert owner_view.serves(sysid, 1.0) and not warm_view.serves(sysid, 1.0)
+    for k, (zo, zw) in enumerate([([0.1, 0.2], [0.1, 0.2]), ([0.3, 0.4], [0.3, 0.4]), ([0.5, 0.6], [0.5, 0.61])]):
+        owner_view.stepped(sysid, k, _State(zo))
+        warm_view.stepped(sysid, k, _State(zw))
+        beat = owner_view.beat_payload(1.0)
+        steps = {int(s): (k_, d) for s, (k_, d) in beat["steps"].items()}
+        assert steps == {sysid: (k, owner_view.steps[sysid][-1][1])}
+        out = warm_view.beat("b", beat["warm"], beat["cold"], 1.0, steps)
+        assert out == ([] if k < 2 else [(sysid, 2)])
+    assert sysid in warm_view.cold and warm_view.out_of_step == 1 and warm_view.sync_plan(1.0) == {sysid: "b"}
+    warm_view.adopted(sysid, 2, _State([0.5, 0.6]))  # the owner's state, copied
+    assert warm_view.beat("b", [sysid], [], 1.0, steps) == []  # the owner's beat again: in step now
+    # a step the member never made (older than its history, or not yet) is not judged
+    assert warm_view.beat("b", [sysid], [], 1.0, {sysid: (99, "0" * 16)}) == [] and sysid in warm_view.warm
+    # the digest sees f_reported too
+    assert state_digest(_State([1.0], [0.5])) != state_digest(_State([1.0], [0.25])) != state_digest(_State([1.0]))
 
 
 # -- the state a member copies ------------------------------------------------------------------------------------

@@ -30,6 +30,11 @@ member therefore takes its vehicles back only once their estimators are the owne
 two members may both send for one sample in the handover (each from its own view, for the milliseconds a beat
 takes) are the same command.
 
+Out of step: two warm members differ when one of them shed a sample (or completed it without its actuator
+report) and the other did not. The owner's beat carries its last step, ``(k, state_digest)``; a warm member that
+remembers another digest for that k turns cold and copies the owner's state (``GroupView.beat``), so a difference
+lasts about one beat.
+
 After a start or a stall a member first listens for ``settle_s`` (it hears every live peer's beat) before it
 judges anything warm on its own.
 """
@@ -37,15 +42,18 @@ judges anything warm on its own.
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Iterable
+from collections import deque
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
-__all__ = ["BEAT_S", "SILENCE_S", "SETTLE_S", "GRACE_S", "weight", "owner", "Peer", "GroupView"]
+__all__ = ["BEAT_S", "SILENCE_S", "SETTLE_S", "GRACE_S", "state_digest", "weight", "owner", "Peer", "GroupView"]
 
 BEAT_S = 0.1  # a member's beat period
 SILENCE_S = 0.35  # a member silent this long is dead to the assignment (3.5 beats: one lost or late beat is not)
 SETTLE_S = 0.15  # after a start or a stall: listen this long (every live peer beats in it) before judging alone
 GRACE_S = 0.3  # a vehicle this new here: a live peer that does not list it yet is presumed to start it too
+HISTORY = 64  # steps remembered per vehicle to compare with the owner's (1.3 s at 50 Hz; beats come every 0.1 s)
 
 
 def weight(prefix: str, sysid: int, member: str) -> int:
@@ -62,6 +70,15 @@ def owner(prefix: str, sysid: int, members: Iterable[str]) -> str | None:
         if best is None or key > best:
             best = key
     return None if best is None else best[1]
+
+
+def state_digest(state: Any) -> str:
+    """64 bits of BLAKE2b over an estimator state's bytes (``z`` and the low-passed f_hat): equal states, equal
+    digests; two members in step have the same digest after the same step."""
+    h = hashlib.blake2b(state.z.tobytes(), digest_size=8)
+    if state.f_reported is not None:
+        h.update(repr(state.f_reported).encode())
+    return h.hexdigest()
 
 
 @dataclass
@@ -101,6 +118,8 @@ class GroupView:
         self.cold: set[int] = set()
         self.grace_s = GRACE_S
         self.first_seen: dict[int, float] = {}  # vehicle -> when this member first saw it
+        self.steps: dict[int, deque[tuple[int, str]]] = {}  # vehicle -> its last (k, state digest) here
+        self.out_of_step = 0  # warm vehicles found out of step with their owner (and copied again)
         self.last_tick = now
         self.quiet_since: float | None = now  # listening (a start or a stall); None once settled
         self.stalls = 0  # how many times this member found itself stalled
@@ -117,15 +136,45 @@ class GroupView:
         if not alive:
             peer.beat_at = None  # a token that comes back (a restarted process) is live at its first beat only
 
-    def beat(self, member: str, warm: Iterable[int], cold: Iterable[int], now: float) -> None:
+    def beat(
+        self,
+        member: str,
+        warm: Iterable[int],
+        cold: Iterable[int],
+        now: float,
+        steps: Mapping[int, tuple[int, str]] | None = None,
+    ) -> list[tuple[int, int]]:
+        """A peer's beat; ``steps``: the (k, state digest) of the vehicles it answers. Returns the vehicles this
+        member was warm for and found out of step with that owner at the same k, as ``(sysid, k)``: they are cold
+        now (a sample one of the two shed or completed without its actuator report), and copied again."""
         if member == self.member:
-            return
+            return []
         peer = self.peers.setdefault(member, Peer())
         peer.beat_at = now
         warm_set, cold_set = frozenset(warm), frozenset(cold)
         if warm_set != peer.warm:
             self._version += 1
         peer.warm, peer.cold = warm_set, cold_set
+        out: list[tuple[int, int]] = []
+        for sysid, (k, digest) in (steps or {}).items():
+            if sysid not in self.warm or self.owner_of(sysid, now) != member:
+                continue
+            mine = next((d for kk, d in self.steps.get(sysid, ()) if kk == k), None)
+            if mine is not None and mine != digest:
+                self.warm.discard(sysid)
+                self.cold.add(sysid)
+                self._version += 1
+                self.out_of_step += 1
+                out.append((sysid, k))
+        return out
+
+    def stepped(self, sysid: int, k: int, state: Any) -> None:
+        """This member stepped ``sysid`` at ``k`` (``state``: its ``EstimatorState`` after the step): remembered to be
+        compared with the owner's beat (the owner's own steps go in its beats)."""
+        history = self.steps.get(sysid)
+        if history is None:
+            history = self.steps[sysid] = deque(maxlen=HISTORY)
+        history.append((k, state_digest(state)))
 
     def live_peers(self, now: float) -> list[str]:
         return sorted(name for name, p in self.peers.items() if p.live(now, self.silence_s))
@@ -181,8 +230,9 @@ class GroupView:
             self._version += 1
         self.warm &= keep
         self.cold &= keep
-        for sysid in [s for s in self.first_seen if s not in keep]:
-            del self.first_seen[sysid]
+        for table in (self.first_seen, self.steps):
+            for sysid in [s for s in table if s not in keep]:
+                del table[sysid]
 
     def owner_of(self, sysid: int, now: float) -> str | None:
         """The member that answers ``sysid`` in this view: rendezvous over the live members warm for it.
@@ -232,12 +282,21 @@ class GroupView:
                 self.adopted(sysid)
         return plan
 
-    def adopted(self, sysid: int) -> None:
-        """The vehicle's estimator is in step with the group again (its state copied, or nobody else has one)."""
+    def adopted(self, sysid: int, k: int | None = None, state: Any = None) -> None:
+        """The vehicle's estimator is in step with the group again: its state copied (at ``k``: the steps remembered
+        before it are not this state's), or nobody else has one."""
+        if state is not None and k is not None:
+            self.steps[sysid] = deque([(k, state_digest(state))], maxlen=HISTORY)
         self.cold.discard(sysid)
         if sysid not in self.warm:
             self.warm.add(sysid)
             self._version += 1
 
-    def beat_payload(self) -> dict[str, list[int]]:
-        return {"warm": sorted(self.warm), "cold": sorted(self.cold)}
+    def beat_payload(self, now: float) -> dict[str, Any]:
+        """What this member's beat says: its warm and cold vehicles and, for those it answers, its last step."""
+        steps = {
+            str(sysid): list(history[-1])
+            for sysid, history in self.steps.items()
+            if history and sysid in self.warm and self.owner_of(sysid, now) == self.member
+        }
+        return {"warm": sorted(self.warm), "cold": sorted(self.cold), "steps": steps}

@@ -4,7 +4,7 @@ Keys, under the contract's ``<prefix>/monitor/`` family (``<prefix>/monitor/<nam
 stays as it is)::
 
     <prefix>/monitor/group/<group>/<member>          liveliness token, while the member's session is up
-    <prefix>/monitor/group/<group>/<member>/beat     {"warm": [sysid...], "cold": [sysid...]}, every 0.1 s
+    <prefix>/monitor/group/<group>/<member>/beat     {"warm": [...], "cold": [...], "steps": {...}}, every 0.1 s
     <prefix>/monitor/group/<group>/<member>/state    queryable: {"<sysid>": state, ...} of its warm vehicles
 
 Why the beats come from the loop and not from a thread: a beat says "this member's loop runs", which is what its
@@ -82,10 +82,11 @@ class GroupLink:
         try:
             d = json.loads(sample.payload.to_bytes())
             warm, cold = [int(s) for s in d["warm"]], [int(s) for s in d["cold"]]
-        except (ValueError, KeyError, TypeError) as exc:
+            steps = {int(s): (int(k), str(digest)) for s, (k, digest) in d.get("steps", {}).items()}
+        except (ValueError, KeyError, TypeError, AttributeError) as exc:
             log.debug("ignoring a beat from %s: %s", name, exc)
             return
-        self._later(self.view.beat, name, warm, cold, now)
+        self._later(self._peer_beat, name, warm, cold, now, steps)
 
     def _on_query(self, query: zenoh.Query) -> None:
         self._later(self._answer, query)
@@ -102,6 +103,17 @@ class GroupLink:
         self._later(self._adopt, plan, name, data)
 
     # -- the loop -------------------------------------------------------------------------------------
+    def _peer_beat(self, name: str, warm: list[int], cold: list[int], now: float, steps: dict) -> None:
+        for sysid, k in self.view.beat(name, warm, cold, now, steps):
+            log.warning(
+                "group '%s': vehicle %d: this member's estimator is out of step with its owner '%s' at k=%d (a sample "
+                "one of the two shed or completed without its actuator report); copying the owner's state",
+                self.group,
+                sysid,
+                name,
+                k,
+            )
+
     def start(self, loop: asyncio.AbstractEventLoop) -> None:
         self._loop = loop
         now = time.monotonic()
@@ -130,7 +142,7 @@ class GroupLink:
             )
         view.forget(self.table.vehicles)
         try:
-            self.beats.put(json.dumps(view.beat_payload()))
+            self.beats.put(json.dumps(view.beat_payload(now)))
         except Exception as exc:  # a closing session costs a beat, not the loop
             log.debug("beat not sent: %s", exc)
         self._report(now)
@@ -194,7 +206,7 @@ class GroupLink:
             if wanted_from != source or state is None or vehicle is None or sysid not in self.view.cold:
                 continue
             if import_state(vehicle, state):
-                self.view.adopted(sysid)
+                self.view.adopted(sysid, state["k"], vehicle.state)
                 log.info(
                     "group '%s': vehicle %d in step again (estimator state copied from '%s' at k=%d)",
                     self.group,

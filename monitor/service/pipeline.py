@@ -317,7 +317,10 @@ class Pipeline:
         route = sample.route
         # a group member steps every vehicle's estimator (above) and answers only the vehicles it owns: a warm
         # member's outputs are gated here and nowhere else
-        serving = self.group is None or self.group.serves(vehicle.sysid, now)
+        group = self.group
+        if group is not None:
+            group.stepped(vehicle.sysid, r.k, vehicle.state)  # compared with the owner's step in its beats
+        serving = group is None or group.serves(vehicle.sysid, now)
         if not serving:
             self.kept_warm += 1
             if self.publisher is not None:
@@ -431,7 +434,8 @@ class Pipeline:
             "feedback": self.feedback_sent,
         }
         if self.group is not None:
-            out.update(served=self.served, kept_warm=self.kept_warm, stalls=self.group.stalls)
+            group = self.group
+            out.update(served=self.served, kept_warm=self.kept_warm, stalls=group.stalls, out_of_step=group.out_of_step)
         if self.publisher is not None:
             out.update(published=self.publisher.published, publish_drops=self.publisher.dropped)
         if not self.scheduled:  # only an envelope has an identified range to be outside of
@@ -480,6 +484,7 @@ class Pipeline:
             "served",
             "kept_warm",
             "stalls",
+            "out_of_step",
             "published",
             "publish_drops",
         )
