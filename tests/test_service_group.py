@@ -7,6 +7,7 @@ import json
 import math
 import subprocess
 import sys
+import time
 from collections import Counter
 from pathlib import Path
 
@@ -318,3 +319,38 @@ def test_a_group_or_member_name_that_is_no_key_chunk_is_one_line(gains_path: Pat
     result = subprocess.run([*base, *flags], capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert "Zenoh key" in result.stderr
+
+
+def test_members_on_zenoh_see_each_other_and_a_second_process_under_one_name_is_an_error(
+    gains_path: Path, caplog
+) -> None:
+    """The wiring on a real Zenoh session (in process): two members see each other's tokens and beats within a few
+    beats; a third link under an existing name is reported."""
+    import asyncio
+
+    from monitor.service.group_link import GroupLink
+    from monitor.wire.zenoh_session import build_config, close_quietly, open_session
+
+    session = open_session(build_config())
+    links: list[GroupLink] = []
+
+    async def run() -> None:
+        loop = asyncio.get_running_loop()
+        now = time.monotonic()
+        for name in ("a", "b", "a"):
+            link = GroupLink(session, "uav", "t", GroupView(name, now=now), _table(gains_path))
+            link.start(loop)
+            links.append(link)
+        await asyncio.sleep(4 * BEAT_S)
+
+    try:
+        with caplog.at_level("INFO", logger="monitor.group"):
+            asyncio.run(run())
+    finally:
+        entities = [e for link in links for e in link.close()]
+        close_quietly(session, *entities)
+    now = time.monotonic()
+    assert links[0].view.live_peers(now) == ["b"] and links[1].view.live_peers(now) == ["a"]
+    errors = [r.message for r in caplog.records if r.levelname == "ERROR"]
+    assert errors and all("another process uses this member's name 'a'" in e for e in errors)
+    assert any("member 'b' in step; live peers: a" in r.message for r in caplog.records)

@@ -21,6 +21,7 @@ import functools
 import json
 import logging
 import time
+import uuid
 from typing import Any
 
 import zenoh
@@ -61,6 +62,8 @@ class GroupLink:
         self._live: tuple[str, ...] = ()
         self._announced = False
         self._stalls_logged = 0
+        self.instance = uuid.uuid4().hex[:12]  # tells this process's beats from another's under the same name
+        self._twins: set[str] = set()
 
     # -- Zenoh threads: stamp, hand over ---------------------------------------------------------------
     def _later(self, fn, *args) -> None:
@@ -81,6 +84,10 @@ class GroupLink:
         name = str(sample.key_expr).split("/")[-2]
         try:
             d = json.loads(sample.payload.to_bytes())
+            if name == self.member:
+                if d.get("instance") != self.instance:
+                    self._later(self._twin, str(d.get("instance")))
+                return
             warm, cold = [int(s) for s in d["warm"]], [int(s) for s in d["cold"]]
             steps = {int(s): (int(k), str(digest)) for s, (k, digest) in d.get("steps", {}).items()}
         except (ValueError, KeyError, TypeError, AttributeError) as exc:
@@ -103,6 +110,17 @@ class GroupLink:
         self._later(self._adopt, plan, name, data)
 
     # -- the loop -------------------------------------------------------------------------------------
+    def _twin(self, instance: str) -> None:
+        """Another process beats under this member's name: both would answer the same vehicles (one ERROR each)."""
+        if instance not in self._twins:
+            self._twins.add(instance)
+            log.error(
+                "group '%s': another process uses this member's name '%s': both answer the same vehicles and their "
+                "peers cannot tell them apart; give every member its own --name",
+                self.group,
+                self.member,
+            )
+
     def _peer_beat(self, name: str, warm: list[int], cold: list[int], now: float, steps: dict) -> None:
         for sysid, k in self.view.beat(name, warm, cold, now, steps):
             log.warning(
@@ -142,7 +160,7 @@ class GroupLink:
             )
         view.forget(self.table.vehicles)
         try:
-            self.beats.put(json.dumps(view.beat_payload(now)))
+            self.beats.put(json.dumps({**view.beat_payload(now), "instance": self.instance}))
         except Exception as exc:  # a closing session costs a beat, not the loop
             log.debug("beat not sent: %s", exc)
         self._report(now)

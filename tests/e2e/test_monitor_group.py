@@ -36,7 +36,7 @@ MEMBERS = ("m1", "m2", "m3")
 GROUP = "g"
 SPEEDUP = 5.0  # a 200-ms sample period: a 150-ms stall of a loaded machine is not a late sample
 H_WALL = 1.0 / SPEEDUP  # paper-continuous: h = 1 s of simulated time
-STEPS = 40
+STEPS = 34
 BIAS_AT = 3
 KILL_WINDOW = 0.15  # s after the kill: the token drops in ms; the sample in flight may go unanswered
 STOP_WINDOW = SILENCE_S + 0.1  # s after the stop: silence after the last beat, plus scheduling slack on 2 cores
@@ -143,7 +143,7 @@ def test_a_group_survives_a_killed_and_a_hung_member(tmp_path: Path, gains_file:
                     wait_for(lambda: len(truth.got) >= 2 * 20, 20, interval=0.01, what="20 samples each")
                     t_stop, wall_stop = time.monotonic(), time.time()
                     os.kill(hung.pid, signal.SIGSTOP)
-                    time.sleep(0.8)
+                    time.sleep(0.7)
                 finally:
                     os.kill(hung.pid, signal.SIGCONT)
                 t_cont = time.monotonic()
@@ -175,8 +175,10 @@ def test_a_group_survives_a_killed_and_a_hung_member(tmp_path: Path, gains_file:
     assert len(answered) >= 2 * (STEPS - 1) - len(excused[a]), len(answered)
 
     # -- no sample got two different commands (the vehicles' own logs) ---------------------------------
+    twice = 0
     for sysid, text in vehicle_logs.items():
         received = _commands(text)
+        twice += len(re.findall(r"command k=\d+ u=\S+ at", text)) - len(received)
         assert len(received) >= STEPS - 10, (sysid, text[-2000:])
         assert all(len(us) == 1 for us in received.values()), {k: us for k, us in received.items() if len(us) > 1}
 
@@ -227,8 +229,8 @@ def test_a_group_survives_a_killed_and_a_hung_member(tmp_path: Path, gains_file:
         f"\ndetected (a survivor's log, ms resolution): kill {_detected(logs[third], killed, wall_kill):.3f} s, "
         f"stop {_detected(logs[third], stopped, wall_stop):.3f} s; A at the kill k~{_k_at(got_truth, a, t_kill)}, "
         f"stop k~{_k_at(got_truth, a, t_stop)}, resume k~{_k_at(got_truth, a, t_cont)}; samples of A not answered in "
-        f"time: {excused[a]}; the blink: {blink}; A answered by {servers_a}; phases (routers, in step, flight, "
-        f"stop) {phases} s"
+        f"time: {excused[a]}; the blink: {blink}; commands that came twice (the same): {twice}; "
+        f"A answered by {servers_a}; phases (routers, in step, flight, stop) {phases} s"
     )
 
 
