@@ -188,3 +188,20 @@ def test_the_estimator_lags_the_signal_as_identify_did_and_restarts_with_the_veh
     assert all(s["alpha"] == 3.0 for s in seen)
     assert _lagged_inputs(vehicle, {"throttle": 1.0}, {"throttle": 80.0}, 3, 0.05)["throttle"] == 80.0  # restarted
     assert "throttle" not in _lagged_inputs(vehicle, {"throttle": 1.0}, {"alpha": 1.0}, 4, 0.05)
+
+
+@pytest.mark.parametrize("value, expected", [("auto", None), ("0", 0.0), ("2.5", 2.5)])
+def test_the_lag_option_takes_seconds_or_auto(value: str, expected: float | None) -> None:
+    from monitor.commands.identify import _lag
+
+    assert _lag(value) == expected
+
+
+@pytest.mark.parametrize("value", ["-1", "nan", "soon"])
+def test_a_wrong_lag_option_is_refused(value: str) -> None:
+    import argparse
+
+    from monitor.commands.identify import _lag
+
+    with pytest.raises(argparse.ArgumentTypeError, match="seconds >= 0 or 'auto'"):
+        _lag(value)

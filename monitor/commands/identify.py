@@ -8,9 +8,17 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 
-from monitor.pipelines.identify_log import DEFAULT_ACTUATOR_LIMIT, AirMeasured, IdentifyRequest, identify_log
+from monitor.pipelines.identify_log import (
+    DEFAULT_ACTUATOR_LIMIT,
+    DEFAULT_KNOWN_INPUT_LAG,
+    KNOWN_INPUT_LAGS,
+    AirMeasured,
+    IdentifyRequest,
+    identify_log,
+)
 from monitor.wire import TURBULENCE_LEVELS
 
 __all__ = ["register"]
@@ -122,8 +130,32 @@ def register(subparsers) -> None:
         "a [known_inputs.linear] column (not a fault): e.g. throttle, which moves with every change of speed; the "
         "log must move it (a mission leg's excite_throttle). Repeat for several",
     )
+    p.add_argument(
+        "--known-input-lag",
+        type=_lag,
+        default=DEFAULT_KNOWN_INPUT_LAG,
+        metavar="S|auto",
+        help="the first-order lag (seconds) through which the known inputs act, identified and estimated with it "
+        f"([known_inputs.lag]): an engine's thrust follows its lever (default: {DEFAULT_KNOWN_INPUT_LAG:g}, a piston "
+        "engine and propeller; a turbine spools up in several seconds); 'auto': the best held-out fit of "
+        f"{', '.join(f'{v:g}' for v in KNOWN_INPUT_LAGS)} s (a longer lag with a larger column often fits as well: "
+        "check it on a second flight)",
+    )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=run)
+
+
+def _lag(text: str) -> float | None:
+    """``S`` seconds >= 0, or ``auto`` (None: picked by the fit)."""
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds >= 0 or 'auto', got {text!r}") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"expected seconds >= 0 or 'auto', got {text!r}")
+    return value
 
 
 def _window(text: str) -> tuple[float, float]:
@@ -153,6 +185,7 @@ def run(args: argparse.Namespace) -> int:
         name=args.name,
         window=args.window,
         known_inputs=tuple(args.known_inputs),
+        known_input_lag=args.known_input_lag,
     )
     done = identify_log(req, say=lambda text: print(f"identify: {text}", file=sys.stderr, flush=True))
     if args.json:

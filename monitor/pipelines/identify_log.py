@@ -141,6 +141,11 @@ def _missing_signals(flight: FlightLog, sysid: int, smap, states: tuple[str, ...
     return line
 
 
+DEFAULT_KNOWN_INPUT_LAG = 1.0  # s: a light aircraft's engine and propeller (--known-input-lag)
+# --known-input-lag auto: the lags tried (s): an engine's thrust follows its lever within a few seconds
+KNOWN_INPUT_LAGS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
+
+
 # --- the pipeline ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class IdentifyRequest:
@@ -163,6 +168,8 @@ class IdentifyRequest:
     window: tuple[float, float] | None = None
     # measured signals identified as inputs besides the elevator (throttle), written as [known_inputs.linear]
     known_inputs: tuple[str, ...] = ()
+    # their first-order lag in seconds ([known_inputs.lag]); None: picked from KNOWN_INPUT_LAGS by the held-out fit
+    known_input_lag: float | None = DEFAULT_KNOWN_INPUT_LAG
 
     @property
     def plant_name(self) -> str:
@@ -392,7 +399,9 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
             "validating"
         )
     result, lags = _identify_with_lags(
-        FlightData(h=h, k=k, states=X, inputs=U, state_names=states, input_names=inputs, state_units=units), say
+        FlightData(h=h, k=k, states=X, inputs=U, state_names=states, input_names=inputs, state_units=units),
+        say,
+        KNOWN_INPUT_LAGS if req.known_input_lag is None else (req.known_input_lag,),
     )
     seconds = time.perf_counter() - started
 
@@ -440,16 +449,14 @@ def _identify(req: IdentifyRequest, say: Callable[[str], None], dlog) -> Identif
     return IdentifiedLog(req, result, sysid, tau_max, units, flight, seconds)
 
 
-# the known inputs' lags tried (s): an engine's thrust follows its lever within a few seconds
-KNOWN_INPUT_LAGS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
-
-
-def _identify_with_lags(data, say: Callable[[str], None]):
+def _identify_with_lags(data, say: Callable[[str], None], lags: tuple[float, ...] = KNOWN_INPUT_LAGS):
     """``(identification, {known input: lag s})``: without known inputs, the plain fit; with them, the fit at each
-    lag of ``KNOWN_INPUT_LAGS`` (every known input through one first-order lag, ``monitor.model.known_inputs``),
-    and the one with the best held-out fit (the mean over the states) kept. Why a lag: the throttle's effect on
-    the pitching moment (thrust, and the propeller's wash over the tail) follows the lever in about a second; an
-    instant column fitted to a lagged effect comes out too small (c172p at 65 kt: a third of the steady effect)."""
+    of ``lags`` (every known input through one first-order lag, ``monitor.model.known_inputs``), and the one with
+    the best held-out fit (the mean over the states) kept. Why a lag: the throttle's effect on the pitching
+    moment (thrust, and the propeller's wash over the tail) follows the lever in about a second; an instant column
+    fitted to a lagged effect comes out too small (c172p at 65 kt: a third of the steady effect). Why the default
+    is one given lag and not the grid: a longer lag with a larger column fits a leg about as well, and the grid's
+    pick moved between 1.5 and 3 s from one identification flight of c172p to the next, its column by 2x."""
     import dataclasses
 
     import numpy as np
@@ -463,7 +470,7 @@ def _identify_with_lags(data, say: Callable[[str], None]):
     scores = []
     U = np.asarray(data.inputs, dtype=float)
     k = np.asarray(data.k, dtype=np.int64)
-    for lag in KNOWN_INPUT_LAGS:
+    for lag in lags:
         shifted = U.copy()
         for j in range(1, U.shape[1]):
             shifted[:, j] = lagged(U[:, j], k, lag, data.h)
@@ -474,7 +481,8 @@ def _identify_with_lags(data, say: Callable[[str], None]):
             best = (score, lag, result)
     assert best is not None
     _score, lag, result = best
-    say(f"known input lag {lag:g} s kept (held-out fit, mean of the states: {', '.join(scores)})")
+    if len(lags) > 1:
+        say(f"known input lag {lag:g} s kept (held-out fit, mean of the states: {', '.join(scores)})")
     return result, {name: lag for name in data.input_names[1:]}
 
 
