@@ -4,7 +4,10 @@ and another hung mid-flight, judged from what reached the vehicles.
 Each vehicle has its own MAVProxy (as each aircraft has its own telemetry router) with one output per member, so
 every member receives every sample. The vehicles' system ids are picked so that vehicle A's owner is killed
 (SIGKILL: its token drops at once), its next owner is then stopped (SIGSTOP: its token stays, its beats stop) and
-resumed (SIGCONT), while vehicle B belongs to the third member throughout. Judged:
+resumed (SIGCONT), while vehicle B belongs to the third member throughout. Before the kill, the member second in line
+for A blinks (stopped 0.22 s, shorter than the silence that counts it dead): it may shed a sample the owner answered,
+and must be back in step (the owner's beat names its last step; the member copies the owner's state) before it takes
+A over. Judged:
 
 * from the truth stream (``uav/<sysid>/truth``, ``status``): every sample answered in time except those whose
   instant lies inside a stated takeover window (the kill's, the stop's);
