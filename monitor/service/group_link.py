@@ -159,10 +159,7 @@ class GroupLink:
                 view.silence_s,
             )
         view.forget(self.table.vehicles)
-        try:
-            self.beats.put(json.dumps({**view.beat_payload(now), "instance": self.instance}))
-        except Exception as exc:  # a closing session costs a beat, not the loop
-            log.debug("beat not sent: %s", exc)
+        self._send_beat(now)
         self._report(now)
         if view.cold and now >= self._query_until:
             plan = view.sync_plan(now)
@@ -176,6 +173,12 @@ class GroupLink:
                     log.debug("state query to %s failed: %s", source, exc)
         assert self._loop is not None
         self._tick = self._loop.call_later(BEAT_S, self._beat)
+
+    def _send_beat(self, now: float) -> None:
+        try:
+            self.beats.put(json.dumps({**self.view.beat_payload(now), "instance": self.instance}))
+        except Exception as exc:  # a closing session costs a beat, not the loop
+            log.debug("beat not sent: %s", exc)
 
     def _report(self, now: float) -> None:
         """INFO when this member is first in step (the ready line of a group) and whenever the live set changes."""
@@ -218,6 +221,7 @@ class GroupLink:
     def _adopt(self, plan: dict[int, str], source: str, data: dict[str, Any]) -> None:
         """Copy the states the plan wanted from ``source``; a vehicle at another sample waits for the next beat."""
         self._query_until = 0.0
+        adopted = False
         for sysid, wanted_from in plan.items():
             state = data.get(str(sysid))
             vehicle = self.table.vehicles.get(sysid)
@@ -232,6 +236,9 @@ class GroupLink:
                     source,
                     state["k"],
                 )
+                adopted = True
+        if adopted:  # say so now, not at the next beat: the owner stops answering within a message's time
+            self._send_beat(time.monotonic())
 
     def stop(self) -> None:
         """Stop beating and handing Zenoh events to the loop (the loop is ending)."""
