@@ -51,11 +51,11 @@ class Aircraft:
 
 
 AIRCRAFT = {
-    # measured: 0.54 deg fault-free (the slow-down: the throttle's pitching moment), 0.54 after the bias's onset
+    # measured: 0.38 deg fault-free (in the mission's last PRBS leg; the manoeuvres <= 0.27), 0.38 after the onset
     "c172p": Aircraft(
-        "c172p", EXAMPLES / "mission-manoeuvres.toml", "c172p-id-100", DATA / "c172p-turns-100kt.toml", 0.8, 0.8
+        "c172p", EXAMPLES / "mission-manoeuvres.toml", "c172p-id-100", DATA / "c172p-turns-100kt.toml", 0.45, 0.45
     ),
-    # measured: 0.25 deg fault-free (in the mission's last PRBS leg), 0.25 after the onset; 0.05 in the slow-down
+    # measured: 0.25 deg fault-free (in the mission's last PRBS leg; the manoeuvres <= 0.18), 0.25 after the onset
     "t6texan2": Aircraft(
         "t6texan2",
         EXAMPLES / "mission-manoeuvres-t6.toml",
@@ -106,9 +106,11 @@ def test_no_alarm_through_turns_and_a_change_of_speed_where_one_trim_alarms(tmp_
     # the envelope: no alarm anywhere, and every manoeuvre within its measured bound
     assert not alarm_env.any()
     assert np.abs(f_env).max() < aircraft.max_fhat
-    for turn in ("turn-30", "turn-45-left", "turn-60"):
-        a, b = seg[turn]
-        assert np.abs(f_env[(t >= a) & (t < b)]).max() < 0.45, turn  # measured: c172p <= 0.31, t6texan2 <= 0.19
+    # every manoeuvre (all but the mission's closing PRBS leg, an excitation): |f_hat| <= 0.3 deg
+    # (measured: c172p <= 0.27, in the 60 deg turn; t6texan2 <= 0.18)
+    for segment, (a, b) in seg.items():
+        if segment != "identification":
+            assert np.abs(f_env[(t >= a) & (t < b)]).max() <= 0.3, segment
 
 
 @pytest.mark.parametrize("name", sorted(AIRCRAFT))
@@ -123,7 +125,7 @@ def test_a_bias_from_the_middle_of_the_slow_down_is_detected_at_once_and_estimat
     assert first.size and first[0] - onset <= 2.0  # measured 0.15 s on both
     after = t >= onset + 2.0
     print(f"{name} after onset + 2 s: f_hat {f[after].min():.3f} .. {f[after].max():.3f}, mean {f[after].mean():.3f}")
-    assert abs(f[after].mean() - 2.0) < 0.1  # measured 1.99 and 1.98
+    assert abs(f[after].mean() - 2.0) < 0.1  # measured 1.985 and 1.979; worst 1.62 (c172p) and 1.75
     assert np.abs(f[after] - 2.0).max() < aircraft.max_error_after
     assert alarm[after].all()
     if name == "t6texan2":  # the rest of the slow-down: within 5 % of the bias (measured 2.3 %; speed-up 5.8 %)
