@@ -122,14 +122,14 @@ class GroupLink:
             )
 
     def _peer_beat(self, name: str, warm: list[int], cold: list[int], now: float, steps: dict) -> None:
-        for sysid, k in self.view.beat(name, warm, cold, now, steps):
+        out = self.view.beat(name, warm, cold, now, steps)
+        if out:  # one line per beat, not per vehicle: under overload many vehicles can be out of step at once
             log.warning(
-                "group '%s': vehicle %d: this member's estimator is out of step with its owner '%s' at k=%d (a sample "
-                "one of the two shed or completed without its actuator report); copying the owner's state",
+                "group '%s': out of step with their owner '%s' (a sample one of the two shed or completed without "
+                "its actuator report): %s; copying the owner's state",
                 self.group,
-                sysid,
                 name,
-                k,
+                _vehicles(f"vehicle {sysid} at k={k}" for sysid, k in out),
             )
 
     def start(self, loop: asyncio.AbstractEventLoop) -> None:
@@ -221,7 +221,7 @@ class GroupLink:
     def _adopt(self, plan: dict[int, str], source: str, data: dict[str, Any]) -> None:
         """Copy the states the plan wanted from ``source``; a vehicle at another sample waits for the next beat."""
         self._query_until = 0.0
-        adopted = False
+        adopted = []
         for sysid, wanted_from in plan.items():
             state = data.get(str(sysid))
             vehicle = self.table.vehicles.get(sysid)
@@ -229,16 +229,15 @@ class GroupLink:
                 continue
             if import_state(vehicle, state):
                 self.view.adopted(sysid, state["k"], vehicle.state)
-                log.info(
-                    "group '%s': vehicle %d in step again (estimator state copied from '%s' at k=%d)",
-                    self.group,
-                    sysid,
-                    source,
-                    state["k"],
-                )
-                adopted = True
+                adopted.append(f"vehicle {sysid} at k={state['k']}")
         if adopted:  # say so now, not at the next beat: the owner stops answering within a message's time
             self._send_beat(time.monotonic())
+            log.info(
+                "group '%s': in step again (estimator state copied from '%s'): %s",
+                self.group,
+                source,
+                _vehicles(adopted),
+            )
 
     def stop(self) -> None:
         """Stop beating and handing Zenoh events to the loop (the loop is ending)."""
@@ -251,3 +250,10 @@ class GroupLink:
         """``stop``, and the entities to undeclare (before the session closes)."""
         self.stop()
         return [*self._entities, self.beats, self.token]
+
+
+def _vehicles(items, most: int = 8) -> str:
+    """``vehicle 1 at k=5, vehicle 2 at k=5`` (the first ``most``, then how many more)."""
+    items = list(items)
+    more = f" and {len(items) - most} more" if len(items) > most else ""
+    return ", ".join(items[:most]) + more

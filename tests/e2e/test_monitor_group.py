@@ -226,7 +226,7 @@ def test_a_group_survives_a_killed_and_a_hung_member(tmp_path: Path, gains_file:
     assert "in step again (estimator state copied from" in logs[stopped], logs[stopped][-3000:]
     assert "was stalled for" in logs[stopped], logs[stopped][-3000:]
     own = logs[stopped]  # what the blink did: out of step and copied back, or nothing shed
-    blink = "out of step" if "is out of step with" in own else "stalled" if own.count("was stalled") > 1 else "none"
+    blink = "out of step" if "out of step with their" in own else "stalled" if own.count("was stalled") > 1 else "none"
     phases = _phases(t0, t_routers, t_ready, t_flown, t_end)
     print(
         f"\ndetected (a survivor's log, ms resolution): kill {_detected(logs[third], killed, wall_kill):.3f} s, "
