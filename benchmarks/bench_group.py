@@ -5,15 +5,18 @@ session in this process). The load generator, also this process, plays ``--vehic
 message per datagram, and sends every datagram to every member (a router's fan-out: MAVProxy with one output per
 member); each vehicle's socket reads the commands back, the source port telling which member answered. After
 ``--warmup`` s the owner of vehicle 1 is killed (SIGKILL); ``--gap`` s later the owner of the first vehicle owned by
-another survivor is stopped (SIGSTOP) for ``--stop`` s and resumed (SIGCONT).
+another survivor is stopped (SIGSTOP) for ``--stop`` s and resumed (SIGCONT); 1 s after that the killed member is
+started again under its name (a member that joins a group in flight: it copies the owners' states, then takes its
+vehicles back).
 
 Printed per event: the vehicles it concerned, the time from the signal to each one's first answer in time from its
 new owner (the takeover; the first sample after it is answered within one period), the samples not answered within
 one sample period around it, and after the SIGCONT how long the resumed member took to answer its vehicles again and
-whether any of their samples went unanswered meanwhile. Overall: the fraction answered in time, the samples answered
-by two members, and how many of those got two different commands (the command frames compared byte for byte).
+whether any of their samples went unanswered meanwhile, and the same for the member that joined. Overall: the
+fraction answered in time, the samples answered by two members, and how many of those got two different commands
+(the command frames compared byte for byte).
 
-    python benchmarks/bench_group.py [--vehicles 10] [--warmup 3] [--gap 3] [--stop 1] [--tail 3]
+    python benchmarks/bench_group.py [--vehicles 10] [--warmup 3] [--gap 3] [--stop 1] [--tail 5]
 """
 
 from __future__ import annotations
@@ -125,13 +128,23 @@ def event_report(fleet: Fleet, n: int, vehicles: list[int], at: float, before: s
         print(f"  {label}: vehicle {v + 1}: new owner's first answer in time {took}; missed in 2 s: {len(missed)}")
 
 
+def back_report(fleet: Fleet, n: int, vehicles: list[int], member: str, k0: int, at: float, label: str, span: float):
+    """When ``member`` answered ``vehicles`` again after ``at`` (sample ``k0``), and what was missed meanwhile."""
+    for v in vehicles:
+        back = next((k for k in range(k0, n) if (t := fleet.timely(v, k)) is not None and t[0] == member), None)
+        missed = [k for k in range(k0, min(n, k0 + int(span / H))) if fleet.timely(v, k) is None]
+        when = f"{(fleet.sent_at[(v, back)] - at) * 1e3:.0f} ms after" if back is not None else "never"
+        near = [k - back for k in missed] if back is not None else missed
+        print(f"  {label}: vehicle {v + 1}: answered by {member} again from {when}; missed: {len(missed)} {near}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--vehicles", type=int, default=10)
     parser.add_argument("--warmup", type=float, default=3.0, help="seconds before the kill (default: 3)")
     parser.add_argument("--gap", type=float, default=3.0, help="seconds from the kill to the stop (default: 3)")
     parser.add_argument("--stop", type=float, default=1.0, help="seconds stopped (default: 1)")
-    parser.add_argument("--tail", type=float, default=3.0, help="seconds flown after the SIGCONT (default: 3)")
+    parser.add_argument("--tail", type=float, default=5.0, help="seconds flown after the SIGCONT (default: 5)")
     args = parser.parse_args()
     workdir = Path(tempfile.mkdtemp(prefix="bench-group-"))
     plant, gains = bench_plant(workdir)
@@ -139,6 +152,7 @@ def main() -> None:
     n = int((args.warmup + args.gap + args.stop + args.tail) / H)
     k_kill, k_stop = int(args.warmup / H), int((args.warmup + args.gap) / H)
     k_cont = k_stop + int(args.stop / H)
+    k_join = k_cont + int(1.0 / H)
     sysids = range(1, args.vehicles + 1)
     killed = owner("uav", 1, MEMBERS)
     survivors = [m for m in MEMBERS if m != killed]
@@ -169,6 +183,11 @@ def main() -> None:
                 elif k == k_cont:
                     os.kill(procs[stopped].pid, signal.SIGCONT)
                     marks["cont"] = time.perf_counter()
+                elif k == k_join:
+                    procs[f"{killed} again"] = start_member(
+                        killed, ports[killed], plant, gains, bus.endpoint, workdir / f"{killed}-again.log"
+                    )
+                    marks["join"] = time.perf_counter()
                 fleet.send(k)
                 fleet.receive(0)
             end = time.perf_counter() + 0.5
@@ -188,11 +207,9 @@ def main() -> None:
     event_report(fleet, n, of_killed, marks["kill"], killed, "SIGKILL")
     print(f"stop {stopped} (owned {[v + 1 for v in of_stopped]}) at {args.warmup + args.gap:g} s for {args.stop:g} s:")
     event_report(fleet, n, of_stopped, marks["stop"], stopped, "SIGSTOP")
-    for v in of_stopped:
-        back = next((k for k in range(k_cont, n) if (t := fleet.timely(v, k)) is not None and t[0] == stopped), None)
-        missed = [k for k in range(k_cont - 1, min(n, k_cont + int(1.0 / H))) if fleet.timely(v, k) is None]
-        when = f"{(fleet.sent_at[(v, back)] - marks['cont']) * 1e3:.0f} ms after the SIGCONT" if back else "never"
-        print(f"  SIGCONT: vehicle {v + 1}: answered by {stopped} again from {when}; missed in the 1 s after: {missed}")
+    back_report(fleet, n, of_stopped, stopped, k_cont, marks["cont"], "SIGCONT", 1.0)
+    print(f"start {killed} again at {args.warmup + args.gap + args.stop + 1:g} s (a member that joins):")
+    back_report(fleet, n, of_killed, killed, k_join, marks["join"], "joined", args.tail - 1.0)
     others = [v for v in range(args.vehicles) if v not in of_killed and v not in of_stopped]
     missed_others = sum(fleet.timely(v, k) is None for v in others for k in range(n))
     print(
