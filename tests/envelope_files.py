@@ -8,6 +8,10 @@ gravity terms (alpha' = q + ..., theta' = q, the -g theta in u') stay. The trim 
 1/V^2, theta with it (level flight), and the elevator trim with alpha. A model a user would identify at each leg
 of a slow-down, not a flight-mechanics model.
 
+``documented_envelope()``: the small envelope of ``docs/explanation/envelope.md`` (two points of a short-period
+model), as the page shows it: a design of it takes a few seconds, for tests of the envelope's plumbing (a cluster, a
+command's per-point output) that need a real design but not the aircraft's size.
+
 ``no_common_p_pair()``: two discrete plants whose loops are each stable while switching between them diverges: the
 state matrices ``A1 = [[0.6, 1.5], [0, 0.6]]`` and ``A2 = A1'`` have spectral radius 0.6 each, but ``A1 A2`` has
 2.93 (> 1), so no common quadratic Lyapunov function exists; the input does not reach the state (``B0 = B1 = 0``),
@@ -18,6 +22,7 @@ from __future__ import annotations
 
 import re
 import tomllib
+from pathlib import Path
 
 import numpy as np
 
@@ -70,6 +75,13 @@ def plant_text(
         f"A_c = {_rows(A_c)}\nB_c = {_rows(B_c)}\nD_cf = {_rows(B_c)}\nD_cd = {_rows(A_c[:, [0]])}\n"
         f"C = {_rows(np.eye(4))}\n\n[actuator]\nlimit = 25.0\n\n{signals}"
     )
+
+
+def documented_envelope() -> str:
+    """The envelope plant file that ``docs/explanation/envelope.md`` shows (its one TOML block with an envelope)."""
+    page = (Path(__file__).resolve().parents[1] / "docs" / "explanation" / "envelope.md").read_text()
+    (text,) = [b for b in re.findall(r"```toml\n(.*?)```", page, flags=re.S) if 'form = "envelope"' in b]
+    return text
 
 
 A1 = np.array([[0.6, 1.5], [0.0, 0.6]])

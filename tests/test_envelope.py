@@ -17,7 +17,7 @@ from monitor.cli import main
 from monitor.errors import UserError
 from monitor.model.envelope import is_envelope, load_envelope, parse_envelope
 from monitor.model.plant import load_plant, parse_plant
-from tests.envelope_files import A1, A2, no_common_p_pair, pair_plant_table, plant_text
+from tests.envelope_files import A1, A2, documented_envelope, no_common_p_pair, pair_plant_table, plant_text
 
 ROOT = Path(__file__).resolve().parents[1]
 AIRSPEEDS = (40.0, 51.4, 62.0)
@@ -290,9 +290,7 @@ def test_the_documented_example_is_an_envelope_that_designs_and_verifies() -> No
     from monitor.checks.envelope import CommonClaim, PointClaim, verify_envelope
     from monitor.design.envelope import design_envelope
 
-    page = (ROOT / "docs/explanation/envelope.md").read_text()
-    (text,) = [b for b in re.findall(r"```toml\n(.*?)```", page, flags=re.S) if 'form = "envelope"' in b]
-    env = parse_envelope(text, "docs/explanation/envelope.md")
+    env = parse_envelope(documented_envelope(), "docs/explanation/envelope.md")
     assert env.names == ("approach", "cruise") and env.schedule == ("airspeed",)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -1,7 +1,8 @@
 """An envelope designed on a real Dask cluster: a ``dask scheduler`` and a ``dask worker`` started as processes of
 their own on loopback (as on other machines, with this package installed), ``fault-monitor design --scheduler``
-sending the points to them; the gains equal those of the design in this process. Every wait bounded; both
-processes stopped."""
+sending the points to them; the gains equal those of the design in this process. The envelope is the small one of
+``docs/explanation/envelope.md`` (two short-period points, a design in seconds): the test is about where the points
+are designed, not their size. Every wait bounded; both processes stopped."""
 
 from __future__ import annotations
 
@@ -16,14 +17,15 @@ import pytest
 
 from monitor.gains import read_envelope_gains
 from tests.daemons import REPO, Daemon, free_tcp_port
+from tests.envelope_files import documented_envelope
 
 pytestmark = [pytest.mark.slow, pytest.mark.daemons]
 
-ENVELOPE = REPO / "tests" / "data" / "c172p-envelope-turns.toml"
-
 
 def design(tmp_path: Path, name: str, *extra: str) -> subprocess.CompletedProcess:
-    cmd = [sys.executable, "-m", "monitor", "design", "--plant", str(ENVELOPE), "--out", str(tmp_path / name), *extra]
+    envelope = tmp_path / "envelope.toml"
+    envelope.write_text(documented_envelope())
+    cmd = [sys.executable, "-m", "monitor", "design", "--plant", str(envelope), "--out", str(tmp_path / name), *extra]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=180, cwd=REPO)
 
 
