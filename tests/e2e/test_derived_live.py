@@ -5,12 +5,11 @@ light turbulence, ``tests/px4_flight.py``), its signal map deriving α; the reco
 from __future__ import annotations
 
 import socket
-import time
 from pathlib import Path
 
 import numpy as np
 
-from tests.daemons import Daemon, free_udp_port
+from tests.daemons import Daemon, free_udp_port, wait_for
 from tests.derived_maps import MAVLINK_MAP
 from tests.px4_flight import T0_US, H, fly, mavlink_samples
 
@@ -38,14 +37,18 @@ def test_run_observe_derives_alpha_from_velocity_attitude_and_wind(tmp_path: Pat
         ]
         args += ["--mavlink", f"udpin:127.0.0.1:{port}", "--rrd", str(rrd), "--no-truth", "--no-gcs-feedback"]
         args += ["--zenoh-mode", "client", "--zenoh-connect", bus.endpoint, "--name", "derived"]
+        estimates = bus.collect("uav/*/fault/estimate")
         with Daemon("monitor", args, tmp_path / "monitor.log") as monitor:
             wait_ready(monitor)
             with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-                for _t, frames in mavlink_samples(flight):
+                for i, (_t, frames) in enumerate(mavlink_samples(flight)):
                     for frame in frames:  # one message per datagram, as a router forwards them
                         sock.sendto(frame, ("127.0.0.1", port))
-                    time.sleep(0.002)
-            time.sleep(0.5)
+                    # paced by the monitor's estimates, at most three samples ahead: a sample waits for at most
+                    # two before it (not past its deadline of h = 20 ms, however slow the machine), and the test
+                    # does not hang on a sample the monitor leaves out (the first, before the derivation has wind)
+                    wait_for(lambda i=i: len(estimates) >= i - 2, 10, interval=0.001, what=f"the estimate of {i - 2}")
+            wait_for(lambda: len(estimates) >= len(flight) - 2, 10, what="the last samples' estimates")
             assert monitor.stop() == 0, monitor.log()[-2000:]
             log = monitor.log()
     assert "y0=angle_of_attack(velocity_ned, attitude_euler, wind_ned)" in log, log[-2000:]
