@@ -6,9 +6,13 @@ reads the log with two identified points (90 and 100 kt, ``tests/data/c172p-enve
 from __future__ import annotations
 
 import re
+import socket
+import threading
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from monitor.design.result import DesignResult
 from monitor.gains import read_envelope_gains, write_gains
@@ -60,35 +64,93 @@ def test_the_envelope_switches_to_the_slow_point_and_reads_the_slow_down_closer_
     assert env_max < one_max
 
 
-# The live flights' pace: 400 samples/s. At 100x (2,000 samples/s) a busy machine's monitor (p99 4.3 ms per sample)
+# The live flight's pace: 400 samples/s. At 100x (2,000 samples/s) a busy machine's monitor (p99 4.3 ms per sample)
 # fell behind, shed overtaken samples and its socket overflowed: 742 of 1,500 processed. These tests are about the
 # envelope's scheduling live, not throughput (benchmarks/ measures that).
 SPEEDUP = 20
+LIVE = {  # each live test's envelope, its gains, and the points its estimates must name before the monitor stops
+    "airspeed": (ENVELOPE, ENVELOPE_GAINS, {"c172p-90kt", "c172p-100kt"}),
+    "turns": (
+        DATA / "c172p-envelope-turns.toml",
+        DATA / "c172p-envelope-turns-gains.toml",
+        {"c172p-id-100", "c172p-id-45"},
+    ),
+}
 
 
-def observe_live(tmp_path: Path, envelope: Path, gains: Path, points: set[str]) -> tuple[str, list[dict], Path]:
-    """``fault-monitor run --observe`` with ``envelope`` while the vehicle flies the short mission at ``SPEEDUP``:
-    the monitor's log (stopped once the estimates on Zenoh have named every one of ``points``), the estimates it
-    published on Zenoh and its recording."""
+class Fanout:
+    """Every datagram the vehicle sends, to each monitor's udpin (observers: nothing goes back to the vehicle)."""
+
+    def __init__(self, ports: list[int]) -> None:
+        self.targets = [("127.0.0.1", port) for port in ports]
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.05)
+        self.port = self.sock.getsockname()[1]
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+            while not self.stop.is_set():
+                try:
+                    data = self.sock.recv(65535)
+                except TimeoutError:
+                    continue
+                for target in self.targets:
+                    out.sendto(data, target)
+
+    def __enter__(self) -> Fanout:
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop.set()
+        self.thread.join(5)
+        self.sock.close()
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory) -> dict[str, tuple[str, list[dict], Path]]:
+    """The short mission flown once at ``SPEEDUP`` and watched by one ``fault-monitor run --observe`` per envelope of
+    ``LIVE`` at once (the vehicle's datagrams to each through ``Fanout``; each monitor on a Zenoh bus of its own):
+    per envelope, the monitor's log (stopped once its estimates on Zenoh have named every one of its points), the
+    estimates it published and its recording. One flight for both tests instead of one each."""
     from tests.daemons import free_udp_port, wait_for
     from tests.monitor_bus import wait_ready, zenoh_bus
 
-    port, rrd = free_udp_port(), tmp_path / "run.rrd"
-    with zenoh_bus() as bus:
-        estimates = bus.collect("uav/*/fault/estimate")
-        args = ["run", "--observe", "--plant", str(envelope), "--gains", str(gains)]
-        args += ["--mavlink", f"udpin:127.0.0.1:{port}", "--rrd", str(rrd), "--no-truth", "--no-gcs-feedback"]
-        args += ["--zenoh-mode", "client", "--zenoh-connect", bus.endpoint, "--name", "envelope"]
-        with Daemon("monitor", args, tmp_path / "monitor.log") as monitor:
+    tmp = tmp_path_factory.mktemp("live")
+    with ExitStack() as stack:
+        runs = {}
+        for name, (envelope, gains, _points) in LIVE.items():
+            bus = stack.enter_context(zenoh_bus())
+            port, rrd = free_udp_port(), tmp / f"{name}.rrd"
+            args = ["run", "--observe", "--plant", str(envelope), "--gains", str(gains), "--rrd", str(rrd)]
+            args += ["--mavlink", f"udpin:127.0.0.1:{port}", "--no-truth", "--no-gcs-feedback"]
+            args += ["--zenoh-mode", "client", "--zenoh-connect", bus.endpoint, "--name", "envelope"]
+            estimates = bus.collect("uav/*/fault/estimate")
+            runs[name] = (
+                stack.enter_context(Daemon("monitor", args, tmp / f"{name}-monitor.log")),
+                port,
+                estimates,
+                rrd,
+            )
+        for monitor, *_ in runs.values():
             wait_ready(monitor)
-            flight = ["run", "--aircraft", "c172p", "--mission", str(SHORT), "--speedup", str(SPEEDUP), "--no-zenoh"]
-            with Daemon("sim_vehicle", [*flight, "--mavlink", f"udpout:127.0.0.1:{port}"], tmp_path / "v.log") as v:
-                assert v.wait(60) == 0, v.log()[-3000:]
+        fanout = stack.enter_context(Fanout([port for _m, port, _e, _r in runs.values()]))
+        flight = ["run", "--aircraft", "c172p", "--mission", str(SHORT), "--speedup", str(SPEEDUP), "--no-zenoh"]
+        with Daemon("sim_vehicle", [*flight, "--mavlink", f"udpout:127.0.0.1:{fanout.port}"], tmp / "v.log") as v:
+            assert v.wait(60) == 0, v.log()[-3000:]
+        out = {}
+        for name, (monitor, _port, estimates, rrd) in runs.items():
+            points = LIVE[name][2]
             # the last leg's estimates through Zenoh (bounded; at once unless the bus lags)
-            wait_for(lambda: points <= {e["point"] for e in list(estimates)}, 10, what=f"estimates at {points}")
-            assert monitor.stop() == 0
-            log = monitor.log()
-    return log, list(estimates), rrd
+            wait_for(
+                lambda e=estimates, p=points: p <= {x["point"] for x in list(e)}, 10, what=f"estimates at {points}"
+            )
+            assert monitor.stop() == 0, monitor.log()[-3000:]
+            out[name] = (monitor.log(), list(estimates), rrd)
+    return out
 
 
 def assert_observed_what_it_got(log: str) -> int:
@@ -105,13 +167,13 @@ def assert_observed_what_it_got(log: str) -> int:
     return processed
 
 
-def test_run_schedules_the_envelope_and_says_which_point_on_zenoh_and_in_the_recording(tmp_path: Path) -> None:
+def test_run_schedules_the_envelope_and_says_which_point_on_zenoh_and_in_the_recording(live) -> None:
     """``fault-monitor run --observe`` with the envelope, the vehicle flying the mission: the ready line names the
     envelope and its points, every estimate names its point, the recording keeps it, the summary counts none
     outside."""
     from monitor.service.recording_reader import load_recording
 
-    log, estimates, rrd = observe_live(tmp_path, ENVELOPE, ENVELOPE_GAINS, {"c172p-90kt", "c172p-100kt"})
+    log, estimates, rrd = live["airspeed"]
     assert (
         "envelope c172p-env scheduled by airspeed: c172p-90kt (airspeed 46.2258 m/s), c172p-100kt (airspeed "
         "51.4446 m/s)" in log.split("ready:")[1].splitlines()[0]
@@ -125,12 +187,11 @@ def test_run_schedules_the_envelope_and_says_which_point_on_zenoh_and_in_the_rec
     assert len(samples) == processed and {s.point for s in samples} == {0, 1} and all(s.inside for s in samples)
 
 
-def test_run_observes_a_turn_with_the_turn_envelope_live_without_an_alarm(tmp_path: Path) -> None:
+def test_run_observes_a_turn_with_the_turn_envelope_live_without_an_alarm(live) -> None:
     """The same flight live with the five-point turn envelope (scheduled on the airspeed and the bank's load
     factor, the throttle a known input): the monitor needs the roll and the throttle in every sample as it needs
     the outputs, takes the 45 deg turn's point in the turn and the cruise point level, raises no alarm."""
-    envelope, gains = DATA / "c172p-envelope-turns.toml", DATA / "c172p-envelope-turns-gains.toml"
-    log, estimates, _rrd = observe_live(tmp_path, envelope, gains, {"c172p-id-100", "c172p-id-45"})
+    log, estimates, _rrd = live["turns"]
     ready = log.split("ready:")[1].splitlines()[0]
     assert "envelope c172p-env scheduled by airspeed, bank_load_factor: " in ready
     assert_observed_what_it_got(log)
