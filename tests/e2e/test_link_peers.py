@@ -104,7 +104,9 @@ def test_a_vehicle_that_never_sends_aoa_ssa_gets_one_warning_naming_it(tmp_path:
         wait_ready(monitor)
         start = time.monotonic()
         k = 0
-        while time.monotonic() - start < 6.0 and "never becomes a sample" not in monitor.log():
+        # the rule: a WARNING once a vehicle was heard for MISSING_WARNING_S (3 s) without a sample, checked at 1 Hz;
+        # the vehicle keeps sending until then (bounded at 10 s: a busy machine's late tick is not the monitor's fault)
+        while time.monotonic() - start < 10.0 and "never becomes a sample" not in monitor.log():
             codec.send(mavlink.MAVLink_attitude_message(k * 50, 0, 0, 0, 0, 0.01, 0))
             codec.send(mavlink.MAVLink_actuator_output_status_message(k * 50_000, 1, [0.0] * 32))
             sock.sendto(codec.file.take(), ("127.0.0.1", port))
@@ -113,7 +115,7 @@ def test_a_vehicle_that_never_sends_aoa_ssa_gets_one_warning_naming_it(tmp_path:
         elapsed = time.monotonic() - start
         log = monitor.log()
     warnings = [line for line in log.splitlines() if "never becomes a sample" in line]
-    assert len(warnings) == 1 and elapsed < 5.0, log[-2000:]
+    assert len(warnings) == 1 and 3.0 <= elapsed < 10.0, log[-2000:]  # while it is heard, not before the 3 s
     assert "WARNING" in warnings[0] and "sysid 12" in warnings[0] and "missing AOA_SSA" in warnings[0]
 
 
