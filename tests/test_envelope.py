@@ -17,6 +17,7 @@ from monitor.cli import main
 from monitor.errors import UserError
 from monitor.model.envelope import is_envelope, load_envelope, parse_envelope
 from monitor.model.plant import load_plant, parse_plant
+from tests.computed_once import computed_once
 from tests.envelope_files import A1, A2, documented_envelope, no_common_p_pair, pair_plant_table, plant_text
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -156,7 +157,9 @@ def test_envelope_command_assembles_points_sorted_by_the_schedule(tmp_path: Path
 
 
 @pytest.mark.slow
-def test_assemble_design_verify_round_trip_over_three_airspeeds(tmp_path: Path) -> None:
+def test_assemble_design_verify_round_trip_over_three_airspeeds(tmp_path: Path, capsys, monkeypatch) -> None:
+    import monitor.checks.envelope
+
     files = []
     for V in AIRSPEEDS:
         path = tmp_path / f"c172p-{V:g}.toml"
@@ -183,9 +186,12 @@ def test_assemble_design_verify_round_trip_over_three_airspeeds(tmp_path: Path) 
     assert gf.common is not None and gf.common.P.shape == (10, 10) and gf.common.gamma > 0
     with pytest.raises(UserError, match="is an envelope gains file"):
         read_gains(gains)
-    checked = cli("verify", "--plant", str(env), "--gains", str(gains), "--json")
-    assert checked.returncode == 0, checked.stdout + checked.stderr
-    report = json.loads(checked.stdout)
+    # verify twice (the file as designed, then with the common bound edited): the points' checks, the same plants
+    # and gains both times, are computed once (tests/computed_once.py: 5 s); the common certificate each time
+    points_checked = computed_once(monkeypatch, monitor.checks.envelope, "verify_gains")
+    capsys.readouterr()
+    assert main(["verify", "--plant", str(env), "--gains", str(gains), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
     assert {"stable", "points", "common_certificate", "gamma_common", "switching_sim_max"} <= set(report)
     assert (
         report["stable"] and report["common_certificate"] and report["gamma_common"] == pytest.approx(gf.common.gamma)
@@ -199,8 +205,10 @@ def test_assemble_design_verify_round_trip_over_three_airspeeds(tmp_path: Path) 
     claimed = re.search(r"^gamma = (.*)$", text, flags=re.M)
     assert claimed is not None
     (tmp_path / "edited.toml").write_text(text.replace(claimed.group(0), f"gamma = {0.5 * float(claimed.group(1))}"))
-    refused = cli("verify", "--plant", str(env), "--gains", str(tmp_path / "edited.toml"), "--json")
-    assert refused.returncode == 1 and json.loads(refused.stdout)["common_certificate"] is False
+    assert main(["verify", "--plant", str(env), "--gains", str(tmp_path / "edited.toml"), "--json"]) == 1
+    refused = json.loads(capsys.readouterr().out)
+    assert refused["common_certificate"] is False and refused["stable"] is False
+    assert [p["stable"] for p in refused["points"]] == [True] * 3 and len(points_checked) == 3
 
 
 def _pair_design(tmp_path: Path) -> tuple[Path, Path]:

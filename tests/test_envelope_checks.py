@@ -12,14 +12,13 @@ from __future__ import annotations
 
 import json
 import re
-from dataclasses import astuple
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from monitor.cli import main
 from monitor.model.envelope import load_envelope
+from tests.computed_once import computed_once
 
 DATA = Path(__file__).parent / "data"
 PLANT = DATA / "c172p-envelope-90-100kt.toml"
@@ -85,25 +84,11 @@ def _check_envelope_answer(env: dict, singles: dict[str, dict], figure: str) -> 
     assert worst[figure] == max(s[figure] for s in singles.values())
 
 
-def _each_bound_computed_once(monkeypatch) -> None:
-    """``fault_threshold`` remembers what it computed for a plant (its file and point) and gains, so that the
-    envelope's text answer prints the bounds its JSON answer computed instead of computing them again (9 s); each
-    point's single-point files and the envelope's points are different plants, so each is computed for real."""
-    import monitor.checks.threshold as threshold
-
-    real, seen = threshold.fault_threshold, {}
-
-    def once(plant, gains, bound):
-        key = (plant.source, plant.digest, bound, *(np.asarray(m).tobytes() for m in astuple(gains)))
-        if key not in seen:
-            seen[key] = real(plant, gains, bound)
-        return seen[key]
-
-    monkeypatch.setattr(threshold, "fault_threshold", once)
-
-
 def test_threshold_bounds_every_point_as_the_single_point_command_does(files, capsys, monkeypatch) -> None:
-    _each_bound_computed_once(monkeypatch)
+    import monitor.checks.threshold
+
+    # the envelope's text answer prints the bounds its JSON answer computed (tests/computed_once.py): 9 s
+    bounds = computed_once(monkeypatch, monitor.checks.threshold, "fault_threshold")
     D = ["--disturbance-bound", "0.001"]
     singles = {
         n: _json(capsys, "threshold", "--plant", str(files[n]), "--gains", str(files[f"{n}-gains"]), *D, "--json")
@@ -121,6 +106,7 @@ def test_threshold_bounds_every_point_as_the_single_point_command_does(files, ca
         assert line.startswith(f"point {name}: threshold {singles[name]['threshold']:.6g} deg")
     worst = env["worst"]
     assert lines[-1] == f"envelope: worst point {worst['name']}: threshold {worst['threshold']:.6g} deg"
+    assert len(bounds) == 4  # two single-point files, two points of the envelope: each computed for real
 
 
 def test_detectability_predicts_every_point_as_the_single_point_command_does(files, capsys) -> None:
