@@ -218,6 +218,26 @@ def test_outside_the_identified_range_is_half_a_spacing_beyond_the_outermost_poi
     assert outside_variables(two, [29.0, 0.0]) == [0]
 
 
+def test_a_combination_beyond_the_points_hull_is_outside_on_both_variables() -> None:
+    """The turn legs flown at cruise only (c172p's identification flight): a 45 deg turn at approach speed is
+    within each variable's range but a tenth of the spreads beyond the points' hull: outside, on both."""
+    from monitor.model.scheduling import HULL_MARGIN, hull_gap
+
+    at = np.array([[33.4, 1.0], [41.2, 1.0], [51.5, 1.0], [51.7, 1.414], [50.8, 2.0]])
+    sched = make_schedule(["airspeed", "bank_load_factor"], ["65", "80", "100", "45", "60"], at)
+    turn_at_approach = [33.4, 1.414]
+    assert hull_gap(sched, turn_at_approach) > HULL_MARGIN
+    assert outside_variables(sched, turn_at_approach) == [0, 1]
+    assert hull_gap(sched, [45.0, 1.2]) == 0.0 and outside_variables(sched, [45.0, 1.2]) == []  # inside the hull
+    # just beyond the cruise turns' edge (a knot fast in a 45 deg turn): within the margin, inside
+    assert 0.0 < hull_gap(sched, [52.2, 1.414]) < HULL_MARGIN and outside_variables(sched, [52.2, 1.414]) == []
+    # the gap is the distance to the hull's closest point in the scaled variables (independent: the edge 65-60)
+    scale = np.ptp(at, axis=0)
+    a, b, p = at[0] / scale, at[4] / scale, np.array(turn_at_approach) / scale
+    t = float(np.clip((p - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1))
+    assert hull_gap(sched, turn_at_approach) == pytest.approx(float(np.linalg.norm(p - a - t * (b - a))), rel=1e-12)
+
+
 def test_re_basing_to_another_point_and_back_is_the_identity() -> None:
     rng = np.random.default_rng(1)
     n, q, m, lags = 4, 1, 1, 2

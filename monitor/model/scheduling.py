@@ -17,9 +17,10 @@ change of flight condition.
 **Inside or outside the identified range.** Per variable, with the points' distinct values ``v_1 < ... < v_N``:
 inside when ``v_1 - (v_2 - v_1)/2 <= x <= v_N + (v_N - v_{N-1})/2``, i.e. no further below the lowest point or
 above the highest than half the spacing to its neighbour (as far as the outermost points would serve if the
-envelope went on with the same spacing). With two variables the region is that box: a hole inside it (a 2-D
-schedule whose points do not fill the box) is served by its nearest point, not flagged. A variable with a
-single value across the points (every point at the same bank) bounds nothing. Outside, the estimator still runs
+envelope went on with the same spacing). With two variables, also within ``HULL_MARGIN`` (a tenth of each
+variable's spread) of the points' convex hull: a corner of the box that no point covers (a steep turn at approach
+speed, when the turns were identified at cruise) is a combination never identified, and flagged. A variable with
+a single value across the points (every point at the same bank) bounds nothing. Outside, the estimator still runs
 on the nearest point (the estimate goes on) but the live loop pauses the alarm (``monitor.service.vehicles``).
 
 **The trim, interpolated; the state re-based to it.** The estimator's state ``z = [x_hat; f_hat; u(k-1)]`` is in
@@ -60,6 +61,7 @@ __all__ = [
     "distances",
     "choose_point",
     "outside_variables",
+    "hull_gap",
     "state_offset",
     "rebase",
     "values_in_order",
@@ -163,15 +165,46 @@ def choose_point(schedule: Schedule, x: Sequence[float], current: int | None, ma
     return nearest if d[current] - d[nearest] > margin * spacing else current
 
 
+HULL_MARGIN = 0.1  # of each variable's spread: how far beyond the points' hull (two variables) is still inside
+
+
 def outside_variables(schedule: Schedule, x: Sequence[float]) -> list[int]:
     """The schedule variables whose value lies outside the identified range (module docstring); empty: inside.
-    A non-finite value is outside."""
+    A non-finite value is outside. On two variables, a sample beyond the points' convex hull by more than
+    ``HULL_MARGIN`` (scaled) is outside on both, though each value alone is within its range: a combination never
+    identified (a 45 deg turn at approach speed, when the turns were identified at cruise) is extrapolated, and
+    on c172p that read 1.5 deg of fault where none was."""
     out = []
     for i, value in enumerate(x):
         v = float(value)
         if not np.isfinite(v) or v < schedule.low[i] - schedule.below[i] or v > schedule.high[i] + schedule.above[i]:
             out.append(i)
+    if not out and schedule.triangulation is not None and hull_gap(schedule, x) > HULL_MARGIN:
+        out = list(range(len(x)))
     return out
+
+
+def hull_gap(schedule: Schedule, x: Sequence[float]) -> float:
+    """The scaled distance from ``x`` to the points' convex hull: 0 inside it, or without a triangulation."""
+    tri = schedule.triangulation
+    if tri is None:
+        return 0.0
+    p = np.asarray(x, dtype=float) / schedule.scale
+    if int(tri.find_simplex(p)) >= 0:
+        return 0.0
+    return _closest_on_hull(tri, schedule.at / schedule.scale, p)[0]
+
+
+def _closest_on_hull(tri: Any, scaled: np.ndarray, p: np.ndarray) -> tuple[float, int, int, float]:
+    """``(distance, a, b, t)``: the hull's closest point to ``p``, ``(1 - t)`` of point ``a`` and ``t`` of ``b``."""
+    best = (np.inf, 0, 0, 0.0)
+    for a, b in tri.convex_hull:
+        edge = scaled[b] - scaled[a]
+        t = float(np.clip((p - scaled[a]) @ edge / (edge @ edge), 0.0, 1.0))
+        gap = float(np.linalg.norm(p - scaled[a] - t * edge))
+        if gap < best[0]:
+            best = (gap, int(a), int(b), t)
+    return best
 
 
 def state_offset(
@@ -248,14 +281,7 @@ def trim_weights(schedule: Schedule, x: Sequence[float]) -> np.ndarray:
     tri = schedule.triangulation
     simplex = int(tri.find_simplex(p))
     if simplex < 0:  # beyond the hull: the hull's closest point, between the two ends of its edge
-        best = (np.inf, 0, 0, 0.0)
-        for a, b in tri.convex_hull:
-            edge = scaled[b] - scaled[a]
-            t = float(np.clip((p - scaled[a]) @ edge / (edge @ edge), 0.0, 1.0))
-            gap = float(np.linalg.norm(p - scaled[a] - t * edge))
-            if gap < best[0]:
-                best = (gap, int(a), int(b), t)
-        _gap, a, b, t = best
+        _gap, a, b, t = _closest_on_hull(tri, scaled, p)
         w[a] += 1.0 - t
         w[b] += t
         return w

@@ -47,7 +47,7 @@ from monitor.link.assembly import AssembledSample, AssemblyCounters, SampleAssem
 from monitor.model.estimator import EstimatorState, StepResult
 from monitor.model.flight_condition import needed_signals, schedule_value
 from monitor.model.known_inputs import lag_factor
-from monitor.model.scheduling import choose_point, outside_variables, rebase, trim_weights
+from monitor.model.scheduling import choose_point, hull_gap, outside_variables, rebase, trim_weights
 from monitor.service.alarm import Alarm, AlarmConfig
 from monitor.service.delay import DelayTracker
 from monitor.service.fleet_file import EnvelopeModel, Fleet, VehicleModel
@@ -557,6 +557,10 @@ class VehicleTable:
             if not vehicle.outside:
                 vehicle.outside = True
                 ranges = "; ".join(_envelope_range(env, i) for i in out)
+                if hull_gap(sched, x) > 0 and all(
+                    sched.low[i] - sched.below[i] <= x[i] <= sched.high[i] + sched.above[i] for i in out
+                ):  # each value within its range, the combination not: say so
+                    ranges += " (each within its range, but no point was identified near this combination)"
                 log.warning(
                     "vehicle %d: %s outside the identified envelope %s: fault alarms paused",
                     vehicle.sysid,
