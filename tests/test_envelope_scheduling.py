@@ -229,8 +229,10 @@ def test_a_combination_beyond_the_points_hull_is_outside_on_both_variables() -> 
     assert hull_gap(sched, turn_at_approach) > HULL_MARGIN
     assert outside_variables(sched, turn_at_approach) == [0, 1]
     assert hull_gap(sched, [45.0, 1.2]) == 0.0 and outside_variables(sched, [45.0, 1.2]) == []  # inside the hull
-    # just beyond the cruise turns' edge (a knot fast in a 45 deg turn): within the margin, inside
-    assert 0.0 < hull_gap(sched, [52.2, 1.414]) < HULL_MARGIN and outside_variables(sched, [52.2, 1.414]) == []
+    # just beyond the cruise turns' edge (a knot fast between the 45 and 60 deg turns): within the margin, inside;
+    # past the fastest point the per-variable margin rules (the value is clipped to the range before the hull)
+    assert 0.0 < hull_gap(sched, [51.6, 1.7]) < HULL_MARGIN and outside_variables(sched, [51.6, 1.7]) == []
+    assert hull_gap(sched, [54.0, 1.414]) == 0.0 and outside_variables(sched, [54.0, 1.414]) == []
     # the gap is the distance to the hull's closest point in the scaled variables (independent: the edge 65-60)
     scale = np.ptp(at, axis=0)
     a, b, p = at[0] / scale, at[4] / scale, np.array(turn_at_approach) / scale

@@ -31,6 +31,18 @@ def test_the_bank_load_factor_is_one_over_cos_bank_the_same_both_ways_and_needs_
     assert needed_signals(["airspeed", "bank_load_factor", "roll"]) == ("airspeed", "roll")
 
 
+def test_the_signed_bank_load_factor_is_the_extra_load_with_the_bank_s_sign() -> None:
+    """``bank_load_factor_signed``: ``sign(roll) (1/cos(roll) - 1)``: zero wings level, opposite in a left and a
+    right turn of one bank, so turn legs flown both ways are two places of the schedule."""
+    for bank in (15.0, 45.0, 60.0):
+        extra = 1.0 / math.cos(math.radians(bank)) - 1.0
+        assert schedule_value("bank_load_factor_signed", {"roll": bank}) == pytest.approx(extra, rel=1e-12)
+        assert schedule_value("bank_load_factor_signed", {"roll": -bank}) == pytest.approx(-extra, rel=1e-12)
+    assert schedule_value("bank_load_factor_signed", {"roll": 0.0}) == 0.0
+    assert needed_signals(["airspeed", "bank_load_factor_signed"]) == ("airspeed", "roll")
+    assert math.isnan(schedule_value("bank_load_factor_signed", {"airspeed": 50.0}))
+
+
 def test_trims_interpolate_linearly_on_one_variable_and_take_the_end_point_beyond() -> None:
     s = make_schedule(["airspeed"], ["a", "b", "c"], np.array([[30.0], [40.0], [60.0]]))
     for x, want in ((20, [1, 0, 0]), (30, [1, 0, 0]), (32.5, [0.75, 0.25, 0]), (45, [0, 0.75, 0.25]), (70, [0, 0, 1])):
@@ -75,8 +87,10 @@ def test_points_a_few_tenths_apart_are_one_level_of_the_identified_range() -> No
     s = make_schedule(["airspeed", "bank_load_factor"], list("abcde"), at)
     assert outside_variables(s, [51.5 + 4.0, 1.0]) == []
     assert outside_variables(s, [51.5 + 5.5, 1.0]) == [0]  # past half of 51.5 - 41.1
-    assert outside_variables(s, [45.0, 2.0 + 0.25]) == []  # half the spacing 1.414 -> 2.0 is 0.29
-    assert outside_variables(s, [45.0, 2.0 + 0.35]) == [1]
+    assert outside_variables(s, [50.1, 2.0 + 0.25]) == []  # half the spacing 1.414 -> 2.0 is 0.29
+    assert outside_variables(s, [50.1, 2.0 + 0.35]) == [1]
+    # a 60 deg turn at 45 m/s: each value in range, the combination beyond the hull (turns identified at cruise)
+    assert outside_variables(s, [45.0, 2.0]) == [0, 1]
 
 
 def test_the_condition_table_is_checked_and_places_a_point_by_the_bank(tmp_path: Path) -> None:

@@ -11,6 +11,11 @@ quantities below, each a fixed function of named measured signals (a closed list
   the same in a left and a right turn: one point at 45 deg serves both (the longitudinal trim of a light
   aircraft does not depend on the turn's direction). It is not the measured normal acceleration (which a gust
   or a pull-up moves): the schedule wants the steady condition.
+* ``bank_load_factor_signed``: ``sign(roll) (1 / cos(roll) - 1)``: 0 wings level, the extra load factor of the
+  turn with the bank's sign (right positive). For an aircraft whose left and right turns trim differently (a
+  propeller's torque and slipstream: JSBSim's J3Cub trims about 0.4 deg of elevator apart in 45 deg turns either
+  way, where c172p and t6texan2 do not differ measurably): its turn legs are flown both ways and each direction is
+  interpolated on its own side, near linear as the unsigned one is.
 """
 
 from __future__ import annotations
@@ -36,7 +41,14 @@ def _bank_load_factor(v: Mapping[str, float]) -> float:
     return 1.0 / math.cos(math.radians(bank))
 
 
-DERIVED: dict[str, Derived] = {"bank_load_factor": Derived(("roll",), "", _bank_load_factor)}
+def _bank_load_factor_signed(v: Mapping[str, float]) -> float:
+    return math.copysign(_bank_load_factor(v) - 1.0, v["roll"])
+
+
+DERIVED: dict[str, Derived] = {
+    "bank_load_factor": Derived(("roll",), "", _bank_load_factor),
+    "bank_load_factor_signed": Derived(("roll",), "", _bank_load_factor_signed),
+}
 
 
 def needed_signals(names: tuple[str, ...] | list[str]) -> tuple[str, ...]:

@@ -185,11 +185,13 @@ def outside_variables(schedule: Schedule, x: Sequence[float]) -> list[int]:
 
 
 def hull_gap(schedule: Schedule, x: Sequence[float]) -> float:
-    """The scaled distance from ``x`` to the points' convex hull: 0 inside it, or without a triangulation."""
+    """The scaled distance from ``x``, clipped to the points' range of each variable, to the points' convex hull:
+    0 inside it, or without a triangulation. Why clipped: beyond the outermost points the per-variable margin
+    (half a spacing) rules, as on one variable; the hull judges the combinations within the ranges."""
     tri = schedule.triangulation
     if tri is None:
         return 0.0
-    p = np.asarray(x, dtype=float) / schedule.scale
+    p = np.clip(np.asarray(x, dtype=float), schedule.low, schedule.high) / schedule.scale
     if int(tri.find_simplex(p)) >= 0:
         return 0.0
     return _closest_on_hull(tri, schedule.at / schedule.scale, p)[0]
