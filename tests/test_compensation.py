@@ -82,3 +82,42 @@ def test_for_an_actuator_fault_the_compensation_is_minus_the_estimate() -> None:
 
     plant = parse_plant(AIRCRAFT_PLANT, "aircraft")  # D_cf = B_c: an elevator bias
     assert fault_compensation(plant) == pytest.approx(-np.eye(1), abs=1e-9)
+
+
+def _fly_with_lost_compensations(report: bool, lost: range) -> list[tuple[int, float]]:
+    """As ``_fly``, but the compensations answering the samples in ``lost`` never act (late: the vehicle holds the
+    one in force); ``report``: the vehicle reports the compensation in force and the estimator is given it."""
+    plant, result = designed("paper-continuous", "certified")
+    est = Estimator(plant, result.gains)
+    s = est.initial_state()
+    A, B0, B1, C, Df = plant.A, plant.B0, plant.B1, plant.C, plant.Df
+    x = np.zeros(plant.n)
+    in_force, sent = 0.0, [0.0]
+    rows = []
+    for k in range(STEPS + 40):
+        y = C @ x
+        a = K_AP * float(y[0])
+        total = a + in_force
+        res, comp = est.compensate(s, k, y, [total], sent, c_in_force=[in_force] if report else None)
+        rows.append((k, float(res.f_hat[0])))
+        acting = in_force if k in lost else comp[0]  # what acts from k h + tau
+        f = BIAS if k >= ONSET else 0.0
+        x = A @ x + (B0 + B1).ravel() * a + B0.ravel() * acting + B1.ravel() * in_force + Df.ravel() * f
+        in_force, sent = acting, comp
+    return rows
+
+
+def test_a_run_of_late_compensations_reported_in_force_is_no_phantom_fault() -> None:
+    """Twenty compensations in a row that never act, from the bias's onset: told which one is in force,
+    the estimator corrects each step as the contract's lost command and f_hat stays on the bias; assuming they
+    acted (the vehicle does not report it), each is a phantom input and f_hat leaves the bias."""
+    lost = range(ONSET + 1, ONSET + 21)  # while f_hat (so the compensation) is still moving
+    told = _fly_with_lost_compensations(report=True, lost=lost)
+    blind = _fly_with_lost_compensations(report=False, lost=lost)
+    settled = [f for k, f in told if k >= ONSET + 8]
+    assert max(abs(f - BIAS) for f in settled) < 0.05 * BIAS, settled
+    assert max(abs(f - BIAS) for k, f in blind if k >= ONSET + 8) > 0.1 * BIAS
+    # and with nothing lost the report changes nothing (every compensation it reports is the one sent)
+    assert [f for _k, f in _fly_with_lost_compensations(True, range(0))] == pytest.approx(
+        [f for _k, f in _fly_with_lost_compensations(False, range(0))], abs=1e-12
+    )

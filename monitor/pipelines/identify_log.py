@@ -50,8 +50,12 @@ KNOWN_INPUT_SIGNALS = ("roll", "r")  # recorded by the plant's map if the identi
 CONDITION_SIGNALS = ("airspeed", *KNOWN_INPUT_SIGNALS, "throttle")
 # identify's default map for an aircraft's telemetry: the longitudinal states, the elevator and what the turn's
 # known inputs need, built from the sample's one definition (monitor.wire.telemetry) as the live default map is
+# recorded with the plant's map, neither state nor condition: the compensation in force that a vehicle flying
+# its own autopilot reports (run --compensate checks with it that its compensations act; docs/missions.md)
+RECORDED_SIGNALS = ("compensation",)
 IDENTIFY_SIGNALS_TOML = contract_signals_toml(
-    ["alpha", "q", "theta", "airspeed", "elevator", *KNOWN_INPUT_SIGNALS, "throttle"], ranges=False
+    ["alpha", "q", "theta", "airspeed", "elevator", *KNOWN_INPUT_SIGNALS, "throttle", *RECORDED_SIGNALS],
+    ranges=False,
 )
 
 DEFAULT_ACTUATOR_LIMIT = 25.0
@@ -107,7 +111,9 @@ def map_for(table: dict[str, Any], source: str, states: tuple[str, ...], layouts
         "actuator": list(actuator),
         # airspeed, roll and r (recorded, not outputs) when the map has them: the flight condition
         "measured": {
-            s: measured[s] for s in dict.fromkeys((*states, actuator[0], *CONDITION_SIGNALS)) if s in measured
+            s: measured[s]
+            for s in dict.fromkeys((*states, actuator[0], *CONDITION_SIGNALS, *RECORDED_SIGNALS))
+            if s in measured
         },
         "command": table.get("command", tomllib.loads(IDENTIFY_SIGNALS_TOML)["signals"]["command"]),
     }

@@ -73,6 +73,24 @@ def answer_within(model: VehicleModel) -> float:
     return ANSWER_WITHIN * (plant.tau_max if plant.lags is not None else plant.h)
 
 
+def _compensation_in_force(vehicle: Vehicle, values: dict[str, float], c_sent: list[float]) -> list[float] | None:
+    """``--compensate``: the compensation in force as the vehicle reports it (the signal ``compensation``,
+    ``ACTUATOR_OUTPUT_STATUS.actuator[2]`` from sim-vehicle), or None while it is not known to report it.
+
+    A vehicle is taken to report it once a reported value equals, to float32, a non-zero compensation the monitor
+    sent: a vehicle that leaves the field at zero (it does not report it) never does, and the estimator then
+    assumes each compensation acted, as before."""
+    value = values.get("compensation")
+    if value is None or not math.isfinite(value) or len(c_sent) != 1:
+        return None
+    if not vehicle.reports_compensation:
+        if c_sent[0] != 0.0 and abs(value - c_sent[0]) <= 1e-6 * max(1.0, abs(c_sent[0])):
+            vehicle.reports_compensation = True
+        else:
+            return None
+    return [float(value)]
+
+
 def _lagged_inputs(
     vehicle: Vehicle, lag: dict[str, float], values: dict[str, float], k: int, h: float
 ) -> dict[str, float]:
@@ -114,6 +132,7 @@ class Vehicle:
         "warned_missing",
         "last_command",
         "last_compensation",
+        "reports_compensation",
         "last_command_k",
         "no_report",
         "rejected",
@@ -169,6 +188,7 @@ class Vehicle:
         self.warned_missing = False
         self.last_command: list[float] | None = None
         self.last_compensation: list[float] | None = None  # --compensate: c(k-1), the last compensation sent
+        self.reports_compensation = False  # ... and whether the vehicle reports the one in force (it matched one)
         self.last_command_k: int | None = None
         self.last_reject_log = -1e9
         self.applied: deque[bool] = deque(maxlen=APPLIED_WINDOW)  # were the last commands seen to act?
@@ -473,7 +493,8 @@ class VehicleTable:
             assert u_report is not None  # observe mode: a sample is complete only with its actuator report
             if self.compensate:
                 c_prev = vehicle.last_compensation or [0.0] * len(u_report)
-                result, compensation = est.compensate(vehicle.state, sample.k, y, u_report, c_prev, known)
+                c_in_force = _compensation_in_force(vehicle, values, c_prev)
+                result, compensation = est.compensate(vehicle.state, sample.k, y, u_report, c_prev, known, c_in_force)
                 vehicle.last_compensation = compensation
             else:
                 result = est.observe(vehicle.state, sample.k, y, u_report, known=known)
