@@ -7,9 +7,9 @@ import json
 
 import pytest
 
-from monitor.checks.margin import delay_margin
 from monitor.cli import main
 from monitor.model.envelope import load_envelope
+from tests.computed_once import computed_once
 from tests.daemons import REPO
 
 pytestmark = pytest.mark.slow
@@ -17,7 +17,13 @@ pytestmark = pytest.mark.slow
 ENVELOPE = REPO / "tests" / "data" / "c172p-envelope-90-100kt.toml"
 
 
-def test_each_point_s_margin_is_its_own_search_and_the_envelope_takes_the_worst(capsys) -> None:
+def test_each_point_s_margin_is_its_own_search_and_the_envelope_takes_the_worst(capsys, monkeypatch) -> None:
+    import monitor.checks.envelope_margin
+
+    # the command's search at each point is remembered (tests/computed_once.py): the check below asks for the same
+    # search on the point's own plant and gets it from there, unless the command searched on another plant or with
+    # other options, which are then searched for real and compared (two searches of 4 s saved, not their check)
+    searched = computed_once(monkeypatch, monitor.checks.envelope_margin, "delay_margin")
     code = main(["margin", "--plant", str(ENVELOPE), "--jobs", "1", "--tolerance", "0.002", "--json"])
     out = capsys.readouterr().out
     assert code == 0, out
@@ -25,12 +31,14 @@ def test_each_point_s_margin_is_its_own_search_and_the_envelope_takes_the_worst(
     envelope = load_envelope(ENVELOPE)
     margins = {p["name"]: p["tau_max"] for p in doc["points"]}
     assert list(margins) == list(envelope.names)
+    search = monitor.checks.envelope_margin.delay_margin
     for point in envelope.points:  # the same search as the single-point command's, on the point's own plant
-        alone = delay_margin(point.plant, tolerance=0.002, curve_points=2)
+        alone = search(point.plant, tolerance=0.002, curve_points=2, objective="fast")
         assert margins[point.name] == pytest.approx(alone.tau_max, abs=1e-12)
         assert margins[point.name] >= envelope.tau_max  # the file's interval is certified, so the margin is above it
     assert doc["worst"] == min(margins, key=margins.__getitem__) and doc["tau_max"] == min(margins.values())
     assert doc["common_certificate"] is True and doc["gamma_common"] > 0 and doc["why_not"] is None
+    assert len(searched) == len(envelope.points)  # the command searched each point as the check does
 
 
 @pytest.mark.parametrize("extra", [["--up-to", "0.1"], ["--png", "m.png"], ["--jobs", "0"]])
