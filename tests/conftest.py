@@ -45,9 +45,12 @@ NOT_PACED = {
 }
 
 
-def _group(path: Path) -> str:
+def _group(path: Path, not_paced: bool = False) -> str:
+    """``not_paced``: a test of a paced module that is not paced itself (``@pytest.mark.not_paced``: a refusal, a log
+    read back, a flight as fast as JSBSim goes) runs beside the unit tests, in its module's own group, and leaves
+    the serial group's time to the paced loops."""
     path = path.resolve()
-    paced = E2E in path.parents and path.stem not in NOT_PACED
+    paced = E2E in path.parents and path.stem not in NOT_PACED and not not_paced
     return "e2e-daemons" if paced else f"module-{path.stem}"
 
 
@@ -73,13 +76,16 @@ SLOW_MODULES = DAEMON_MODULES | {
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "daemons: starts daemons or programs on loopback (tests/e2e and DAEMON_MODULES)")
     config.addinivalue_line("markers", "slow: seconds per test; `-m 'not slow'` is the quick subset")
+    config.addinivalue_line(
+        "markers", "not_paced: an end-to-end test no paced loop's verdict hangs on: out of the serial xdist group"
+    )
 
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
         path = Path(str(item.fspath)).resolve()
-        item.add_marker(pytest.mark.xdist_group(_group(path)))
+        item.add_marker(pytest.mark.xdist_group(_group(path, item.get_closest_marker("not_paced") is not None)))
         in_e2e = E2E in path.parents
         if in_e2e or path.stem in DAEMON_MODULES:
             item.add_marker(pytest.mark.daemons)

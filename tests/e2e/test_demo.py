@@ -68,6 +68,7 @@ def test_monte_carlo_mode_depends_on_the_seed_and_keeps_the_live_summary(out):
     assert not a["results"]["separate"]["stable"] and a["results"]["separate"]["peak_alpha_worst"] < 30
 
 
+@pytest.mark.not_paced  # refusals: no loop
 def test_bad_options_are_one_line(tmp_path):
     proc = subprocess.run(
         [sys.executable, "-m", "monitor", "demo", "--out", str(tmp_path), "--methods", "magic"],

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from monitor.api import read_recording
 from monitor.model.plant import load_plant
@@ -68,6 +69,7 @@ def test_aircraft_demo_identifies_designs_and_flies_the_fault_live(tmp_path: Pat
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
 
 
+@pytest.mark.not_paced  # refusals: no flight
 def test_aircraft_demo_refuses_what_does_not_apply_in_one_line(tmp_path: Path) -> None:
     for args, words in (
         (("--runs", "3"), "--runs does not apply"),

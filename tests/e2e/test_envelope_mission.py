@@ -30,6 +30,7 @@ SHORT = REPO / "docs" / "examples" / "mission-short.toml"
 H = 0.05
 
 
+@pytest.mark.not_paced  # a flight as fast as JSBSim goes, read back
 def test_the_envelope_switches_to_the_slow_point_and_reads_the_slow_down_closer_to_zero(tmp_path: Path) -> None:
     tlog = log_mission(tmp_path, SHORT)
     point = read_envelope_gains(ENVELOPE_GAINS).points["c172p-100kt"]

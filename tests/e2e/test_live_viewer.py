@@ -14,6 +14,8 @@ import signal
 import subprocess
 from pathlib import Path
 
+import pytest
+
 from tests.daemons import free_tcp_port, free_udp_port, wait_for
 from tests.monitor_bus import monitor_daemon, processed_count, sim_daemon, wait_ready, zenoh_bus
 from tests.rerun_viewer import headless_viewer, load_when_complete
@@ -96,6 +98,7 @@ def test_a_viewer_that_dies_or_never_answers_costs_neither_the_loop_nor_the_file
     assert "Traceback" not in log
 
 
+@pytest.mark.not_paced  # refusals: no loop
 def test_a_bad_viewer_address_is_one_line_and_exit_2(tmp_path: Path, gains_file: Path) -> None:
     import sys
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 import signal
 from pathlib import Path
 
+import pytest
+
 from tests.daemons import free_udp_port, wait_for
 from tests.monitor_bus import monitor_daemon, processed_count, settling_k, sim_daemon, wait_ready, zenoh_bus
 
@@ -84,6 +86,7 @@ def test_sigterm_mid_run_leaves_a_complete_recording(tmp_path: Path, gains_file:
     assert len(recording.vehicles[1].samples) == n
 
 
+@pytest.mark.not_paced  # a refusal: no loop
 def test_gains_for_another_plant_are_refused(tmp_path: Path, gains_file: Path) -> None:
     import subprocess
     import sys

@@ -34,6 +34,7 @@ def read_jsonl(path: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines()]
 
 
+@pytest.mark.not_paced  # as fast as JSBSim goes: no pace
 def test_the_short_example_mission_is_flown_segment_by_segment_as_commanded(tmp_path: Path) -> None:
     truth_file, summary = tmp_path / "truth.jsonl", tmp_path / "summary.json"
     with vehicle(
@@ -125,6 +126,7 @@ def test_a_compensation_sent_over_mavlink_is_added_after_its_delay_and_reported(
     assert "ignored while flying on board (autopilot/excitation) 0" in d.log()
 
 
+@pytest.mark.not_paced  # as fast as JSBSim goes: no pace
 def test_a_segment_the_aircraft_cannot_fly_ends_the_run_with_one_line(tmp_path: Path) -> None:
     plan = tmp_path / "fast.toml"
     plan.write_text(
