@@ -93,6 +93,22 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.slow)
 
 
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """The serial group's first test starts, at a low priority, the commands its later tests need the output of
+    (``tests/ahead.py``: the long-delay design)."""
+    group = item.get_closest_marker("xdist_group")
+    if group is not None and group.args[0] == "e2e-daemons":
+        from tests.ahead import start_for_session
+
+        start_for_session(item.session.items)
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    from tests.ahead import stop_all
+
+    stop_all()
+
+
 @pytest.fixture(scope="session", autouse=True)
 def shared_design_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
     """One design cache for the session, shared by the xdist workers (``tests/designs.py``)."""

@@ -41,8 +41,6 @@ class Flight:
 
 def design_and_fly(tmp_path: Path, plant: str, steps: int, *vehicle_args: str) -> Flight:
     """`design --plant PLANT` (the default design), then one closed-loop c172p flight of ``steps`` samples at 3x."""
-    from monitor.api import read_recording
-
     gains = tmp_path / "gains.toml"
     done = subprocess.run(
         [sys.executable, "-m", "monitor", "design", "--plant", plant, "--out", str(gains)],
@@ -51,6 +49,14 @@ def design_and_fly(tmp_path: Path, plant: str, steps: int, *vehicle_args: str) -
         timeout=240,
     )
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    return fly(tmp_path, plant, gains, done.stdout, steps, *vehicle_args)
+
+
+def fly(tmp_path: Path, plant: str, gains: Path, design_out: str, steps: int, *vehicle_args: str) -> Flight:
+    """One closed-loop c172p flight of ``steps`` samples at 3x with ``gains`` (``design_out``: what `design` printed
+    when it wrote them)."""
+    from monitor.api import read_recording
+
     port, rrd, truth = free_udp_port(), tmp_path / "run.rrd", tmp_path / "truth.jsonl"
     monitor = Daemon(
         "monitor",
@@ -102,7 +108,7 @@ def design_and_fly(tmp_path: Path, plant: str, steps: int, *vehicle_args: str) -
         assert monitor.wait(30) == 0, monitor.log()[-3000:]
     samples = read_recording(rrd).vehicles[1].samples
     return Flight(
-        design_out=done.stdout,
+        design_out=design_out,
         monitor_log=monitor.log(),
         truth=[json.loads(line) for line in truth.read_text().splitlines()],
         f_hat={r.k: float(np.ravel(r.f_hat)[0]) for r in samples},
