@@ -3,13 +3,14 @@
 Why: the serial ``e2e-daemons`` group (``tests/conftest.py``) is the suite's critical path, and its loops spend
 most of their time waiting on the wall clock. ``tests/e2e/test_multi_delay_aircraft.py`` first designs and
 verifies its long-delay plant with the README's commands (64 delay vertices: some 17 s of CPU in that group, on
-nothing paced) and only then flies. Started when the group's first test starts, at ``nice 19`` (a paced daemon that
-wakes takes the core back at once), the commands use the time the group's loops leave idle; the test reads their
-output when it comes to it. The same commands and the same outputs, each computed for real once.
+nothing paced) and only then flies; the turbulence and compensation flights design first too (3 s each). Started
+when the group's first test starts, at ``nice 19`` (a paced daemon that wakes takes the core back at once), the
+commands use the time the group's loops leave idle; each test reads their output when it comes to it. The same
+commands and the same outputs, each computed for real once.
 
 ``ahead(name)`` waits (bounded) for job ``name`` and returns its commands' results and its directory. When the job
 is still running then, it gets its priority back (root: the machines that run the suite; else it is run again at
-once, as the test would have run it). When nothing started it (the test run alone), the hook starts it there.
+once, as the test would have run it). When nothing started it (the test run alone), it starts there.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from monitor.process import stop_process_group
 
 REPO = Path(__file__).resolve().parent.parent
 LONG_DELAY_PLANT = str(REPO / "tests" / "data" / "c172p-longitudinal-long-delay.toml")
+TURBULENCE_PLANT = str(REPO / "tests" / "data" / "c172p-longitudinal-turbulence.toml")
 
 
 def _monitor(*args: str) -> list[str]:
@@ -40,7 +42,15 @@ JOBS: dict[str, tuple[str, list[list[str]]]] = {
             _monitor("design", "--plant", LONG_DELAY_PLANT, "--out", "gains.toml"),
             _monitor("verify", "--plant", LONG_DELAY_PLANT, "--gains", "gains.toml"),
         ],
-    )
+    ),
+    "turbulence": (
+        "tests/e2e/test_turbulence.py",
+        [_monitor("design", "--plant", TURBULENCE_PLANT, "--out", "gains.toml")],
+    ),
+    "compensate": (  # the raw estimate: the compensation acts on it
+        "tests/e2e/test_compensate_mission.py",
+        [_monitor("design", "--plant", TURBULENCE_PLANT, "--fault-time-constant", "0", "--out", "gains.toml")],
+    ),
 }
 NICE = 19
 WAIT_S = 300.0

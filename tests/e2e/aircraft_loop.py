@@ -1,16 +1,15 @@
 """One closed-loop flight of a JSBSim c172p against a real ``fault-monitor run``, as a user would fly it.
 
-Shared by the e2e tests that judge the loop on the nonlinear aircraft (long delays, turbulence): the README's
-``design`` through the CLI, the monitor as a daemon on loopback, ``sim-vehicle --aircraft`` flying ``steps``
-samples, the monitor stopped by a signal (its summary and a complete recording), and the truth read back.
+Shared by the e2e tests that judge the loop on the nonlinear aircraft (long delays, turbulence): gains from the
+README's ``design`` through the CLI (``tests/ahead.py`` runs it), the monitor as a daemon on loopback,
+``sim-vehicle --aircraft`` flying ``steps`` samples, the monitor stopped by a signal (its summary and a complete
+recording), and the truth read back.
 """
 
 from __future__ import annotations
 
 import json
 import re
-import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,19 +36,6 @@ class Flight:
         """``f_hat - f`` over the samples ``first .. last - 1`` that were recorded."""
         truth_f = {p["k"]: float(p["f"][0]) for p in self.truth}
         return np.array([self.f_hat[k] - truth_f[k] for k in range(first, last) if k in self.f_hat])
-
-
-def design_and_fly(tmp_path: Path, plant: str, steps: int, *vehicle_args: str) -> Flight:
-    """`design --plant PLANT` (the default design), then one closed-loop c172p flight of ``steps`` samples at 3x."""
-    gains = tmp_path / "gains.toml"
-    done = subprocess.run(
-        [sys.executable, "-m", "monitor", "design", "--plant", plant, "--out", str(gains)],
-        capture_output=True,
-        text=True,
-        timeout=240,
-    )
-    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
-    return fly(tmp_path, plant, gains, done.stdout, steps, *vehicle_args)
 
 
 def fly(tmp_path: Path, plant: str, gains: Path, design_out: str, steps: int, *vehicle_args: str) -> Flight:

@@ -6,21 +6,20 @@ applied at the surface) and the monitor's recording; every wait bounded, every p
 from __future__ import annotations
 
 import json
+import shutil
 import signal
 from pathlib import Path
 
 import numpy as np
 
-from monitor.design import run_design
-from monitor.gains import write_gains
-from monitor.model.plant import load_plant
 from monitor.service.recording_reader import load_recording
-from tests.daemons import REPO, Daemon, free_udp_port
+from tests.ahead import TURBULENCE_PLANT, ahead
+from tests.daemons import Daemon, free_udp_port
 from tests.monitor_bus import wait_ready
 
 H = 0.05
 ONSET = 200  # 10 s
-IDENTIFIED = REPO / "tests" / "data" / "c172p-longitudinal-turbulence.toml"
+IDENTIFIED = Path(TURBULENCE_PLANT)
 MISSION = """
 [[segment]]
 name = "level"
@@ -32,11 +31,13 @@ bank = 0
 
 
 def test_the_compensation_reaches_the_surface_and_cancels_the_bias(tmp_path: Path) -> None:
-    # a c172p model identified at the mission's trim (100 kt, 3000 ft), designed for the raw estimate
+    # a c172p model identified at the mission's trim (100 kt, 3000 ft), designed for the raw estimate (by `design`
+    # run ahead of the test at a low priority: tests/ahead.py)
     plant_path, gains = tmp_path / "c172p.toml", tmp_path / "gains.toml"
     plant_path.write_text(IDENTIFIED.read_text())
-    plant_model = load_plant(str(plant_path))
-    write_gains(gains, run_design("certified", plant_model, fault_time_constant=0), plant_model)
+    (design, *_), folder = ahead("compensate")
+    assert design.returncode == 0, design.stdout[-2000:] + design.stderr[-2000:]
+    shutil.copy(folder / "gains.toml", gains)
     plant = plant_path
     mission = tmp_path / "level.toml"
     mission.write_text(MISSION)
