@@ -144,6 +144,16 @@ def ahead(name: str) -> tuple[list[subprocess.CompletedProcess], Path]:
     return job.results, job.folder
 
 
+def designed_ahead(name: str, gains: Path) -> list[subprocess.CompletedProcess]:
+    """Job ``name`` (a `design`, then maybe more) once finished: its design succeeded and wrote ``gains`` (copied
+    there from the job's directory); its commands' results."""
+    done, folder = ahead(name)
+    design = done[0]
+    assert design.returncode == 0, design.stdout[-2000:] + design.stderr[-2000:]
+    shutil.copy(folder / "gains.toml", gains)
+    return done
+
+
 def stop_all() -> None:
     """At the session's end: whatever is still running is stopped, every directory removed."""
     while _started:

@@ -6,14 +6,13 @@ applied at the surface) and the monitor's recording; every wait bounded, every p
 from __future__ import annotations
 
 import json
-import shutil
 import signal
 from pathlib import Path
 
 import numpy as np
 
 from monitor.service.recording_reader import load_recording
-from tests.ahead import TURBULENCE_PLANT, ahead
+from tests.ahead import TURBULENCE_PLANT, designed_ahead
 from tests.daemons import Daemon, free_udp_port
 from tests.monitor_bus import wait_ready
 
@@ -35,9 +34,7 @@ def test_the_compensation_reaches_the_surface_and_cancels_the_bias(tmp_path: Pat
     # run ahead of the test at a low priority: tests/ahead.py)
     plant_path, gains = tmp_path / "c172p.toml", tmp_path / "gains.toml"
     plant_path.write_text(IDENTIFIED.read_text())
-    (design, *_), folder = ahead("compensate")
-    assert design.returncode == 0, design.stdout[-2000:] + design.stderr[-2000:]
-    shutil.copy(folder / "gains.toml", gains)
+    designed_ahead("compensate", gains)
     plant = plant_path
     mission = tmp_path / "level.toml"
     mission.write_text(MISSION)

@@ -8,12 +8,11 @@ the vehicle's truth stream: f_hat within 5 % of the bias from 1 s after onset, n
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
 
-from tests.ahead import LONG_DELAY_PLANT, ahead
+from tests.ahead import LONG_DELAY_PLANT, designed_ahead
 from tests.e2e.aircraft_loop import RATE, fly
 
 PLANT = LONG_DELAY_PLANT
@@ -23,14 +22,10 @@ STEPS = ONSET + 11 * RATE  # 5 s before the bias, 11 s after it
 
 def test_a_jsbsim_aircraft_with_commands_one_to_two_and_a_half_samples_late(tmp_path: Path) -> None:
     # the README's design and verify of the plant, run ahead of the test at a low priority (tests/ahead.py)
-    done, folder = ahead("long-delay")
-    design = done[0]
-    assert design.returncode == 0, design.stdout[-2000:] + design.stderr[-2000:]
-    assert "delay      past one sample" in design.stdout, design.stdout
-    verify = done[1]
-    assert verify.returncode == 0 and "certificate                      valid" in verify.stdout, verify.stdout
     gains = tmp_path / "gains.toml"
-    shutil.copy(folder / "gains.toml", gains)
+    design, verify = designed_ahead("long-delay", gains)
+    assert "delay      past one sample" in design.stdout, design.stdout
+    assert verify.returncode == 0 and "certificate                      valid" in verify.stdout, verify.stdout
     flight = fly(
         tmp_path,
         PLANT,
