@@ -121,3 +121,35 @@ def test_a_run_of_late_compensations_reported_in_force_is_no_phantom_fault() -> 
     assert [f for _k, f in _fly_with_lost_compensations(True, range(0))] == pytest.approx(
         [f for _k, f in _fly_with_lost_compensations(False, range(0))], abs=1e-12
     )
+
+
+def test_observe_only_after_lost_samples_reads_the_state_from_the_outputs_not_a_phantom_fault() -> None:
+    """Observe-only, the vehicle's own controller moving the elevator while ten samples are lost: the prediction
+    held the last deflection reported, so the first innovation read the controller's moves as a fault (a spike);
+    with the state read from the outputs (``C = I``) and u(k-1) taken as the deflection reported now, f_hat stays
+    near where it was (zero: there is no fault). The same flight without the gap: zero throughout (exact model)."""
+    from monitor.model.closed_loop import Gains
+    from monitor.model.plant import parse_plant
+    from tests.envelope_files import short_period
+
+    plant = parse_plant(short_period(3.8, 0.0, -7.1), "sp.toml")
+    gains = Gains(
+        L=0.5 * plant.A, M=np.array([[0.1, 0.1]]), K1=np.zeros((1, 2)), K2=np.zeros((1, 1)), K3=np.zeros((1, 1))
+    )
+
+    def fly(lost: range) -> list[float]:
+        est = Estimator(plant, gains)
+        s = est.initial_state()
+        x, u_prev, f_hat = np.zeros(2), 0.0, []
+        for k in range(60):
+            u = 0.8 * np.sin(0.3 * k)  # the vehicle's own controller, unknown to the monitor while samples are lost
+            if k not in lost:
+                f_hat.append(float(est.observe(s, k, x.copy(), [u]).f_hat[0]))
+            x = plant.A @ x + plant.B0.ravel() * u + plant.B1.ravel() * u_prev
+            u_prev = u
+        return f_hat
+
+    assert max(map(abs, fly(range(0)))) < 1e-9
+    # what is left is u(k-1), unknown after the gap, taken as u(k): 0.014 here (without reading the state from the
+    # outputs and that guess: 1.56, one sample)
+    assert max(map(abs, fly(range(30, 40)))) < 0.05

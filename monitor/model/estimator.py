@@ -147,6 +147,11 @@ class Estimator:
         self._U_rows = self._U.tolist()
         self._compensation_rows = fault_compensation(plant).tolist()
         self._skipped = 0
+        # observe-only after lost samples: the state read from the outputs, when they give it (C square and
+        # well conditioned, as an identified model's C = I; not a lagged plant, whose commands in flight are state)
+        self._reseed: list[list[float]] | None = None
+        if plant.lags is None and C.shape[0] == C.shape[1] and np.linalg.cond(C) < 1e8:
+            self._reseed = np.linalg.inv(C).tolist()
         ki = plant.known_inputs
         self._gamma_rows: list[list[float]] | None = ki.gamma.tolist() if ki is not None else None
         self._O_rows = self._O.tolist()
@@ -281,9 +286,28 @@ class Estimator:
         known: Sequence[float] | None = None,
     ) -> StepResult:
         """Observe-only: eq. (5) with the u(k) the vehicle's own controller issued (no command computed).
-        ``known``: as for ``step`` (the prediction only; the certificates are unchanged)."""
-        v = self._advance(s, k, u_prev) + [float(e) for e in np.ravel(y)]
-        return self._finish(s, k, v, [float(e) for e in np.ravel(u_now)], known)
+        ``known``: as for ``step`` (the prediction only; the certificates are unchanged). After lost samples see
+        ``_resume``."""
+        u = [float(e) for e in np.ravel(u_now)]
+        ys = [float(e) for e in np.ravel(y)]
+        z = self._advance(s, k, u_prev)
+        if self._skipped:
+            self._resume(z, ys, u)
+        return self._finish(s, k, z + ys, u, known)
+
+    def _resume(self, z: list[float], y: list[float], u_prev: list[float]) -> None:
+        """The first sample after lost ones, when the vehicle's own controller flies (observe-only, compensate).
+
+        The prediction across the gap held the last deflection reported before it, but the vehicle's controller
+        kept moving the surface, so the predicted state is off by what it did, and the first innovation would
+        read that as a fault: on c172p's turn envelope, one sample of 1.1 deg after 20 samples lost in a turn
+        (3 deg once, live). So the state is read from the outputs where they give it (``x_hat = C^-1 y``, the
+        innovation then zero) and u(k-1), unknown, is taken as the deflection reported now; f_hat keeps its
+        value. A fault that began inside the gap is learnt from the next samples' innovations instead."""
+        if self._reseed is not None:
+            for i, row in enumerate(self._reseed):
+                z[i] = sum(map(mul, row, y))
+        z[self._nq :] = u_prev
 
     def compensate(
         self,
@@ -330,9 +354,12 @@ class Estimator:
                 missed = [a - b for a, b in zip(in_force, c_sent, strict=True)]
             c_sent = in_force
         z = self._advance(s, k, total)
-        if missed is not None:
+        ys = [float(e) for e in np.ravel(y)]
+        if self._skipped:
+            self._resume(z, ys, total)
+        elif missed is not None:
             self._correct_inputs(z, np.array(missed))
-        v = z + [float(e) for e in np.ravel(y)]
+        v = z + ys
         f_raw = v[s.n : self._nq]
         comp = [sum(map(mul, row, f_raw)) for row in self._compensation_rows]
         lim = self._lim
