@@ -251,21 +251,34 @@ class SampleAssembler:
         phase = self.phase_us
         return int(round((t_us - phase if phase is not None else t_us) / self.h_us))
 
-    def index_of(self, message: str, values: tuple) -> int | None:
-        """The sample index a message of this vehicle belongs to (None if the map does not use it)."""
+    def locate(self, message: str, values: tuple) -> tuple[int, int] | None:
+        """``(instant in us, sample index)`` of a timed message of this vehicle (None if the map does not time it)."""
         spec = self._parts.get(message)
         if spec is None:
             return None
-        return self._index(self._instant_us(int(values[spec[0]]), spec[1], spec[2]))
+        t_us = self._instant_us(int(values[spec[0]]), spec[1], spec[2])
+        return t_us, self._index(t_us)
+
+    def index_of(self, message: str, values: tuple) -> int | None:
+        """The sample index a message of this vehicle belongs to (None if the map does not use it)."""
+        at = self.locate(message, values)
+        return at[1] if at is not None else None
 
     def add(
-        self, message: str, values: tuple, route: object, now: float, max_k: int | None = None, k: int | None = None
+        self,
+        message: str,
+        values: tuple,
+        route: object,
+        now: float,
+        max_k: int | None = None,
+        k: int | None = None,
+        t_us: int | None = None,
     ) -> list[AssembledSample]:
         """File one decoded message (``values``: its unpacked payload) under its instant.
 
         ``max_k``: the newest instant the vehicle's clock can have reached; parts beyond it are refused
         (``future``), so a forged far-future stamp can neither be processed nor lock later samples out.
-        ``k``: the message's sample index when the caller already computed it (``index_of``).
+        ``k``, ``t_us``: the message's sample index and instant when the caller already computed them (``locate``).
         """
         spec = self._parts.get(message)
         if spec is None:
@@ -277,7 +290,8 @@ class SampleAssembler:
             self._set_held(message, values)
         self.seen.add(message)
         t_pos, unit_us, wrap, signals = spec
-        t_us = self._instant_us(int(values[t_pos]), unit_us, wrap)
+        if t_us is None:
+            t_us = self._instant_us(int(values[t_pos]), unit_us, wrap)
         if k is None:
             k = self._index(t_us)
         c = self.counters

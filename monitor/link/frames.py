@@ -104,6 +104,14 @@ class FrameParser:
         if self._buf:
             data = self._buf + data
             self._buf = b""
+        elif self.signer is None and len(data) > _HEADER2 + 2 and data[0] == _STX2 and len(data) == 12 + data[1]:
+            # the common datagram: one MAVLink 2 frame, exactly (routers send one message per datagram)
+            msgid = data[7] | data[8] << 8 | data[9] << 16
+            extra = self._crc_extra.get(msgid) or self._extra(msgid)
+            if not data[2] and extra is not None and crc16(extra, crc16(data[1:-2])) == data[-2] | data[-1] << 8:
+                self.counters.frames += 1
+                self.version = 2
+                return [(msgid, data[5], data[6], data[_HEADER2:-2])]
         out: list[RawFrame] = []
         c = self.counters
         i, n = 0, len(data)
@@ -207,32 +215,32 @@ class FrameEncoder:
         self.signer = signer
         self.version = version
         self.seq = 0
+        self._incompat = _SIGNED if signer else 0
 
     def encode(self, layout: MessageLayout, values: tuple) -> bytes:
         """A frame of ``layout`` whose payload is ``layout.unpacker.pack(*values)`` (wire order, arrays flat)."""
         msgid = layout.msgid
         v1_length = mavlink1_length(msgid) if self.version == 1 else None
+        seq = self.seq
+        self.seq = (seq + 1) & 0xFF
         if v1_length is not None:  # MAVLink 1: the base fields, never truncated
             payload = layout.unpacker.pack(*values)[:v1_length]
-            frame = _HEADER1_STRUCT.pack(_STX1, len(payload), self.seq, self.sysid, self.compid, msgid) + payload
+            frame = _HEADER1_STRUCT.pack(_STX1, len(payload), seq, self.sysid, self.compid, msgid) + payload
         else:
             payload = layout.unpacker.pack(*values).rstrip(b"\x00") or b"\x00"  # MAVLink 2 truncation
             frame = (
                 _HEADER_STRUCT.pack(
-                    _STX2,
-                    len(payload),
-                    _SIGNED if self.signer else 0,
-                    0,
-                    self.seq,
-                    self.sysid,
-                    self.compid,
-                    msgid & 0xFFFF,
-                    msgid >> 16,
+                    _STX2, len(payload), self._incompat, 0, seq, self.sysid, self.compid, msgid & 0xFFFF, msgid >> 16
                 )
                 + payload
             )
-        frame += _CRC.pack(crc16(bytes((layout.crc_extra,)), crc16(frame[1:])))
-        self.seq = (self.seq + 1) & 0xFF
+        extra = _EXTRA.get(msgid)
+        if extra is None:
+            extra = _EXTRA[msgid] = bytes((layout.crc_extra,))
+        frame += _CRC.pack(crc16(extra, crc16(frame[1:])))
         if self.signer is not None:
             frame += self.signer.sign(frame)
         return frame
+
+
+_EXTRA: dict[int, bytes] = {}  # msgid -> its CRC extra as the one byte the CRC takes last

@@ -57,7 +57,8 @@ def command_frame(enc: FrameEncoder, cmd: CommandMap, sysid: int, time_usec: int
     """The command for ``sysid`` answering the instant ``time_usec``; ``u`` in plant units, already saturated."""
     controls = [0.0] * 8
     for channel, scale, value in zip(cmd.channels, cmd.full_scale, u, strict=True):
-        controls[channel] = _f32(float(value) / scale)
+        v = float(value) / scale
+        controls[channel] = v if -_FLOAT32_MAX <= v <= _FLOAT32_MAX or v != v else math.copysign(math.inf, v)
     return enc.encode(_COMMAND, (time_usec, *controls, cmd.group, sysid, VEHICLE_COMPONENT))
 
 
@@ -69,6 +70,8 @@ def fhat_frames(enc: FrameEncoder, time_usec: int, f_hat) -> bytes:
     """One ``NAMED_VALUE_FLOAT`` per fault channel, concatenated (one datagram)."""
     ms = (time_usec // 1000) & 0xFFFFFFFF
     n = len(f_hat)
+    if n == 1:  # the common case, without the join
+        return enc.encode(_NAMED_FLOAT, (ms, _f32(f_hat[0]), b"FHAT"))
     return b"".join(enc.encode(_NAMED_FLOAT, (ms, _f32(v), fhat_name(i, n))) for i, v in enumerate(f_hat))
 
 

@@ -215,11 +215,16 @@ class SignalMap:
         object.__setattr__(self, "raw", {**raw, **self.inputs})
         derived = tuple((n, s.derivation) for n, s in self.measured.items() if s.derivation is not None)
         object.__setattr__(self, "derived", derived)
+        ranges = {n: sig.range for n, sig in self.measured.items()}
+        judged = tuple((n, ranges.get(n)) for n in (*self.outputs, *self.actuator))
+        object.__setattr__(self, "judged", judged)
 
     # every signal read from a message (the measured ones and the derived signals' inputs), by name: what the
     # assembler joins; and the derived signals, computed from those once a sample is complete
     raw: dict[str, Signal] = dc_field(init=False, repr=False, compare=False)
     derived: tuple[tuple[str, Derivation], ...] = dc_field(init=False, repr=False, compare=False)
+    # what ``reject_reason`` judges, per sample: (signal, its range or None) of the outputs and actuator signals
+    judged: tuple[tuple[str, tuple[float, float] | None], ...] = dc_field(init=False, repr=False, compare=False)
 
     def read_from(self, names) -> tuple[str, ...]:
         """The signals read from messages that ``names`` need: themselves, or a derived signal's inputs."""
@@ -278,13 +283,12 @@ class SignalMap:
 
         Only the signals the estimator uses are judged; a bad recorded-only signal is dropped by the caller.
         """
-        for name in (*self.outputs, *self.actuator):
+        for name, bounds in self.judged:
             v = values.get(name)
             if v is None:
                 continue
             if not math.isfinite(v):
                 return f"{name} = {v}"
-            bounds = self.measured[name].range
             if bounds is not None and not bounds[0] <= v <= bounds[1]:
                 return f"{name} = {v:.6g} outside [{bounds[0]:g}, {bounds[1]:g}]"
         return None

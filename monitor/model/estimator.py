@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
 from operator import mul
 from typing import TYPE_CHECKING
 
@@ -57,20 +56,63 @@ if TYPE_CHECKING:
 __all__ = ["EstimatorState", "StepResult", "Estimator", "report_pole"]
 
 
+_GAP_IN_FLOATS = 8  # lost samples predicted one by one over floats; a longer gap takes one matrix power
+
+
+def _floats(values: ArrayLike) -> list[float]:
+    """A vector as a list of floats: a list as it is (the live loop's), anything else through numpy."""
+    if isinstance(values, list):
+        try:
+            return [float(e) for e in values]
+        except TypeError:  # nested: a column written as a list of lists
+            pass
+    return [float(e) for e in np.ravel(values)]
+
+
 def report_pole(h: float, fault_time_constant: float | None) -> float:
     """The reported estimate's low-pass pole ``a = e^{-h/T}`` (module docstring); 0 without a time constant."""
     return math.exp(-h / fault_time_constant) if fault_time_constant else 0.0
 
 
-@dataclass
 class EstimatorState:
-    """Everything one vehicle's loop remembers between samples: ``z = [x_hat; f_hat; u(k-1)]``."""
+    """Everything one vehicle's loop remembers between samples: ``z = [x_hat; f_hat; u(k-1)]``.
 
-    z: np.ndarray
-    n: int
-    q: int
-    k_last: int | None = None
-    f_reported: list[float] | None = None  # the low-passed estimate (fault_time_constant), None: none yet
+    Why a list inside: the estimator's products run over plain floats, and a numpy array made and taken apart
+    again every sample cost more than the products. ``z`` still hands out (and takes) a numpy array, made on
+    demand; once handed out, the array is what the next step reads, so a caller may change it in place.
+    """
+
+    __slots__ = ("n", "q", "k_last", "f_reported", "_values", "_array")
+
+    def __init__(
+        self,
+        z: np.ndarray | list[float],
+        n: int,
+        q: int,
+        k_last: int | None = None,
+        f_reported: list[float] | None = None,  # the low-passed estimate (fault_time_constant), None: none yet
+    ) -> None:
+        self.n, self.q, self.k_last, self.f_reported = n, q, k_last, f_reported
+        self._values: list[float] = z if isinstance(z, list) else []
+        self._array: np.ndarray | None = None if isinstance(z, list) else z
+
+    @property
+    def z(self) -> np.ndarray:
+        if self._array is None:
+            self._array = np.array(self._values)
+        return self._array
+
+    @z.setter
+    def z(self, value: np.ndarray) -> None:
+        self._array = value
+
+    def values(self) -> list[float]:
+        """``z`` as a fresh list of floats (the estimator's working copy)."""
+        return self._array.tolist() if self._array is not None else self._values.copy()
+
+    def set_values(self, z: list[float]) -> None:
+        """The new ``z`` (a list the state now owns)."""
+        self._values, self._array = z, None
 
     @property
     def x_hat(self) -> np.ndarray:
@@ -84,16 +126,57 @@ class EstimatorState:
     def u_prev(self) -> np.ndarray:
         return self.z[self.n + self.q :]
 
+    def __repr__(self) -> str:
+        return f"EstimatorState(z={self.z!r}, n={self.n}, q={self.q}, k_last={self.k_last})"
 
-@dataclass(frozen=True)
+
 class StepResult:
-    k: int
-    u: np.ndarray  # the command (saturated) or, observe-only, the reported u(k)
-    x_hat: np.ndarray  # estimate at k (before the update)
-    f_hat: np.ndarray  # estimate at k (before the update), as reported (low-passed with a fault_time_constant)
-    residual: np.ndarray
-    skipped: int  # samples predicted open-loop because their telemetry never arrived
-    reset: bool = False  # the state had become non-finite and was reset to zero
+    """One step's outcome. Kept as lists of floats (what the live loop formats and sends); the numpy arrays
+    ``u``, ``x_hat``, ``f_hat`` and ``residual`` are made on first use (tests, analyses)."""
+
+    __slots__ = ("k", "skipped", "reset", "u_values", "x_hat_values", "f_hat_values", "residual_values", "_arrays")
+
+    def __init__(
+        self,
+        k: int,
+        u: list[float],  # the command (saturated) or, observe-only, the reported u(k)
+        x_hat: list[float],  # estimate at k (before the update)
+        f_hat: list[float],  # estimate at k (before the update), as reported (low-passed with a fault_time_constant)
+        residual: list[float],
+        skipped: int,  # samples predicted open-loop because their telemetry never arrived
+        reset: bool = False,  # the state had become non-finite and was reset to zero
+    ) -> None:
+        self.k, self.skipped, self.reset = k, skipped, reset
+        self.u_values, self.x_hat_values, self.f_hat_values, self.residual_values = u, x_hat, f_hat, residual
+        self._arrays: dict[str, np.ndarray] = {}
+
+    def _array(self, name: str, values: list[float]) -> np.ndarray:
+        out = self._arrays.get(name)
+        if out is None:
+            out = self._arrays[name] = np.array(values, dtype=float)
+        return out
+
+    @property
+    def u(self) -> np.ndarray:
+        return self._array("u", self.u_values)
+
+    @property
+    def x_hat(self) -> np.ndarray:
+        return self._array("x_hat", self.x_hat_values)
+
+    @property
+    def f_hat(self) -> np.ndarray:
+        return self._array("f_hat", self.f_hat_values)
+
+    @property
+    def residual(self) -> np.ndarray:
+        return self._array("residual", self.residual_values)
+
+    def __repr__(self) -> str:
+        return (
+            f"StepResult(k={self.k}, u={self.u_values}, x_hat={self.x_hat_values}, f_hat={self.f_hat_values}, "
+            f"residual={self.residual_values}, skipped={self.skipped}, reset={self.reset})"
+        )
 
 
 class Estimator:
@@ -142,6 +225,9 @@ class Estimator:
         predict[:n, n : n + q] = Df
         predict[:n, n + q :] = B0 + B1
         self._predict_T = predict
+        self._predict_rows = predict.tolist()
+        self._A_rows, self._B0_rows, self._B01_rows = A.tolist(), B0.tolist(), (B0 + B1).tolist()
+        self._lags = plant.lags
         self._m, self._N, self._nq = m, N, n + q
         self._n_reported = plant.physical.n  # x_hat as reported: the aircraft's state, not the commands in flight
         self._U_rows = self._U.tolist()
@@ -161,7 +247,7 @@ class Estimator:
 
     def initial_state(self) -> EstimatorState:
         p = self.plant
-        return EstimatorState(z=np.zeros(p.n + p.q + p.m), n=p.n, q=p.q)
+        return EstimatorState(z=[0.0] * (p.n + p.q + p.m), n=p.n, q=p.q)
 
     def saturate(self, u: np.ndarray) -> np.ndarray:
         """``u`` (deviation) limited so that ``u0 + u`` stays within the actuator limit."""
@@ -181,23 +267,28 @@ class Estimator:
         whole interval, so ``x_hat(k)`` is corrected by ``B0 (held - u(k-1))``: the estimator steps with
         the held deflection, as the contract says, instead of learning a phantom fault.
         """
-        if s.k_last is not None and k <= s.k_last:
-            raise ValueError(f"sample {k} is not newer than {s.k_last}")
+        last = s.k_last
+        if last is not None and k <= last:
+            raise ValueError(f"sample {k} is not newer than {last}")
         self._skipped = 0
-        if s.k_last is not None:
-            gap = k - s.k_last - 1
+        z = s.values()
+        if last is not None:
+            gap = k - last - 1
             if gap > self.max_gap:
-                s.z = np.zeros(self._N)
-            elif gap:
-                s.z = np.linalg.matrix_power(self._predict_T, gap) @ s.z
+                z = [0.0] * self._N
+            elif gap > _GAP_IN_FLOATS:  # a long gap: one matrix power
+                z = (np.linalg.matrix_power(self._predict_T, gap) @ np.array(z)).tolist()
                 self._skipped = gap
-        z: list[float] = s.z.tolist()
-        if u_prev is not None and self.plant.lags is None:
-            nq = self._nq
+            elif gap:
+                rows = self._predict_rows
+                for _ in range(gap):
+                    z = [sum(map(mul, row, z)) for row in rows]
+                self._skipped = gap
+        if u_prev is not None and self._lags is None:
             held = [float(e) for e in u_prev]
             if applied is False:
                 self._held_correction(z, held)
-            z[nq:] = held
+            z[self._nq :] = held
         return z
 
     def _held_correction(self, z: list[float], held: list[float]) -> None:
@@ -206,20 +297,23 @@ class Estimator:
         The step at k-1 assumed ``B0 u(k-1)`` and each lost sample after it assumed the actuator held
         u(k-1); in fact it held ``held`` all along. With ``delta = held - u(k-1)`` the error in ``x_hat`` is
         ``B0 delta`` after the step, then ``A (.) + (B0 + B1) delta`` per predicted sample (f_hat is not
-        affected: no innovation used u). Rare (a lost or late command), so numpy is fine here.
+        affected: no innovation used u). Plain floats: a vehicle that never applies the monitor's commands (an
+        observer's test rig, a load generator) makes this every sample.
         """
-        self._correct_inputs(z, np.array(held) - np.array(z[self._nq :]))
+        self._correct_inputs(z, [h - p for h, p in zip(held, z[self._nq :], strict=True)])
 
-    def _correct_inputs(self, z: list[float], delta: np.ndarray) -> None:
+    def _correct_inputs(self, z: list[float], delta: list[float]) -> None:
         """``x_hat`` in ``z`` corrected for an input that acted ``delta`` off what the last step assumed over the
         interval's tail (``B0 delta``), and held so over the samples predicted since (``A (.) + (B0 + B1) delta``
         each)."""
-        n = self.plant.n
-        correction = self.plant.B0 @ delta
-        for _ in range(self._skipped):
-            correction = self.plant.A @ correction + (self.plant.B0 + self.plant.B1) @ delta
-        for i in range(n):
-            z[i] += float(correction[i])
+        correction = [sum(map(mul, row, delta)) for row in self._B0_rows]
+        if self._skipped:
+            drift = [sum(map(mul, row, delta)) for row in self._B01_rows]  # (B0 + B1) delta
+            rows = self._A_rows
+            for _ in range(self._skipped):
+                correction = [sum(map(mul, row, correction)) + d for row, d in zip(rows, drift, strict=True)]
+        for i, c in enumerate(correction):
+            z[i] += c
 
     def _finish(
         self, s: EstimatorState, k: int, v: list[float], u: list[float], known: Sequence[float] | None = None
@@ -236,22 +330,14 @@ class Estimator:
             for i, row in enumerate(gamma):
                 z_next[i] += sum(map(mul, row, kv))
         reset = not all(map(math.isfinite, z_next))
-        s.z = np.zeros(self._N) if reset else np.array(z_next)
+        s.set_values([0.0] * self._N if reset else z_next)
         s.k_last = k
         f_hat = v[n:nq]
         if self._keep:
             keep = self._keep
             previous = s.f_reported if s.f_reported is not None and not reset else [0.0] * len(f_hat)
             f_hat = s.f_reported = [keep * p + (1.0 - keep) * f for p, f in zip(previous, f_hat, strict=True)]
-        return StepResult(
-            k=k,
-            u=np.array(u),
-            x_hat=np.array(v[: self._n_reported]),
-            f_hat=np.array(f_hat),
-            residual=np.array(out[nq:]),
-            skipped=self._skipped,
-            reset=reset,
-        )
+        return StepResult(k, u, v[: self._n_reported], f_hat, out[nq:], self._skipped, reset)
 
     def step(
         self,
@@ -269,7 +355,7 @@ class Estimator:
         ``known``: the known-input term vector at k (module docstring; ignored for a plant without known
         inputs). It changes the prediction only: the certificates are unchanged (it cancels in the error).
         """
-        v = self._advance(s, k, u_prev, applied) + [float(e) for e in np.ravel(y)]
+        v = self._advance(s, k, u_prev, applied) + _floats(y)
         u = [sum(map(mul, row, v)) for row in self._U_rows]
         bounds = self._bounds
         if bounds is not None:
@@ -288,8 +374,8 @@ class Estimator:
         """Observe-only: eq. (5) with the u(k) the vehicle's own controller issued (no command computed).
         ``known``: as for ``step`` (the prediction only; the certificates are unchanged). After lost samples see
         ``_resume``."""
-        u = [float(e) for e in np.ravel(u_now)]
-        ys = [float(e) for e in np.ravel(y)]
+        u = _floats(u_now)
+        ys = _floats(y)
         z = self._advance(s, k, u_prev)
         if self._skipped:
             self._resume(z, ys, u)
@@ -345,7 +431,7 @@ class Estimator:
         answers: on c172p at 4x real time on a loaded machine, 30 late ones in a row swung it to the 25 deg stop,
         alternating sign, before it settled.
         """
-        total = [float(e) for e in np.ravel(u_total)]
+        total = _floats(u_total)
         c_sent = [float(e) for e in c_prev]
         missed = None
         if c_in_force is not None:
@@ -354,11 +440,11 @@ class Estimator:
                 missed = [a - b for a, b in zip(in_force, c_sent, strict=True)]
             c_sent = in_force
         z = self._advance(s, k, total)
-        ys = [float(e) for e in np.ravel(y)]
+        ys = _floats(y)
         if self._skipped:
             self._resume(z, ys, total)
         elif missed is not None:
-            self._correct_inputs(z, np.array(missed))
+            self._correct_inputs(z, missed)
         v = z + ys
         f_raw = v[s.n : self._nq]
         comp = [sum(map(mul, row, f_raw)) for row in self._compensation_rows]

@@ -272,7 +272,7 @@ class Pipeline:
             self.messages.excess += len(frames) - MAX_FRAMES_PER_DATAGRAM
             frames = frames[:MAX_FRAMES_PER_DATAGRAM]
         answered: set[int] | None = set() if datagram else None
-        wanted = self._wanted
+        wanted, message = self._wanted, self.table.message
         for msgid, sysid, _compid, payload in frames:
             entry = wanted.get(msgid)
             if entry is None:
@@ -281,8 +281,8 @@ class Pipeline:
                 else:
                     self.messages.foreign += 1
                 continue
-            name, layout = entry
-            for vehicle, sample in self.table.message(sysid, name, layout.decode(payload), route, now):
+            completed = message(sysid, entry[0], entry[1].decode(payload), route, now)
+            for vehicle, sample in completed:
                 if answered is not None:
                     if sysid in answered:
                         self.messages.excess += 1
@@ -341,7 +341,7 @@ class Pipeline:
                 out = command_frame(enc, vehicle.model.signals.command, vehicle.sysid, sample.time_usec, sent)
                 self.commands_sent += 1
             if self.gcs_feedback:
-                out += fhat_frames(enc, sample.time_usec, r.f_hat)
+                out += fhat_frames(enc, sample.time_usec, r.f_hat_values)
                 if p.alarm_event is not None:
                     out += alarm_text_frame(enc, vehicle.sysid, p.alarm_event, p.f_mag, vehicle.model.plant.unit)
                 self.feedback_sent += 1
@@ -355,9 +355,9 @@ class Pipeline:
                     vehicle.sysid,
                     r.k,
                     p.t,
-                    r.f_hat,
-                    r.x_hat,
-                    r.residual,
+                    r.f_hat_values,
+                    r.x_hat_values,
+                    r.residual_values,
                     p.u_abs,
                     p.tau_obs,
                     raised,
@@ -367,7 +367,7 @@ class Pipeline:
                 )
             )
             if p.alarm_event is not None:
-                self.publisher.alarm(vehicle.sysid, r.k, p.t, p.alarm_event, r.f_hat)
+                self.publisher.alarm(vehicle.sysid, r.k, p.t, p.alarm_event, r.f_hat_values)
         if p.alarm_event is not None:
             log.info(
                 "vehicle %d: alarm %s at k=%d (|f_hat| = %.3g %s)",
@@ -396,10 +396,10 @@ class Pipeline:
             alpha=values.get("alpha"),
             q=values.get("q"),
             elevator=elevator,
-            x_hat=r.x_hat.tolist(),
-            f_hat=r.f_hat.tolist(),
-            u=r.u.tolist(),
-            residual=r.residual.tolist(),
+            x_hat=r.x_hat_values,
+            f_hat=r.f_hat_values,
+            u=r.u_values,
+            residual=r.residual_values,
             tau_obs=p.tau_obs,
             processing_s=processing,
             alarm=p.vehicle.alarm.raised,

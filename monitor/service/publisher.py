@@ -75,13 +75,28 @@ def estimate_payload(item: EstimateItem, unit: str, member: str | None = None) -
     return payload
 
 
+def _float_list(values) -> list[float]:
+    if type(values) is list:  # the loop's (floats, or ints from a limit written as an integer)
+        return [float(v) for v in values]
+    return values.tolist() if hasattr(values, "tolist") else [float(v) for v in values]
+
+
 def _json_numbers(values) -> str:
     """``[0.1, null]``: floats as ``json.dumps`` writes them (``repr``), a non-finite one as null."""
-    floats = values.tolist() if hasattr(values, "tolist") else [float(v) for v in values]
+    floats = _float_list(values)
     text = repr(floats)  # one C call for the common case; "nan", "inf" are the only reprs with an "n"
     if "n" not in text:
         return text
     return "[" + ", ".join(repr(v) if v - v == 0.0 else "null" for v in map(float, floats)) + "]"
+
+
+def _json_vectors(*vectors) -> list[str]:
+    """``_json_numbers`` of each, from one ``repr`` of them all in the common case (every number finite): the
+    reprs of floats hold no brackets, so the lists are split at ``], [``."""
+    text = repr([_float_list(v) for v in vectors])
+    if "n" in text:
+        return [_json_numbers(v) for v in vectors]
+    return ["[" + part + "]" for part in text[2:-2].split("], [")]
 
 
 _JSON_LITERAL = {True: "true", False: "false", None: "null"}
@@ -93,18 +108,30 @@ def estimate_json(item: EstimateItem, unit: str, member: str | None = None) -> s
     sysid, k, t, f_hat, x_hat, residual, u, tau, alarm, applied, effective = item[:11]
     envelope = item[11] if len(item) > 11 else None
     tail = (
-        f',"point":{json.dumps(envelope[0])},"in_envelope":{_JSON_LITERAL[bool(envelope[1])]}'
+        f',"point":{_json_string(envelope[0])},"in_envelope":{_JSON_LITERAL[bool(envelope[1])]}'
         if envelope is not None
         else ""
     )
-    tail += f',"member":{json.dumps(member)}}}' if member is not None else "}"
+    tail += f',"member":{_json_string(member)}}}' if member is not None else "}"
+    f_json, x_json, r_json, u_json = _json_vectors(f_hat, x_hat, residual, u)
     return (
-        f'{{"sysid":{int(sysid)},"k":{int(k)},"t":{_json_float(t)},"f_hat":{_json_numbers(f_hat)},'
-        f'"x_hat":{_json_numbers(x_hat)},"residual":{_json_numbers(residual)},"u":{_json_numbers(u)},'
+        f'{{"sysid":{int(sysid)},"k":{int(k)},"t":{_json_float(t)},"f_hat":{f_json},'
+        f'"x_hat":{x_json},"residual":{r_json},"u":{u_json},'
         f'"tau":{"null" if tau is None else _json_float(tau)},"alarm":{_JSON_LITERAL[bool(alarm)]},'
-        f'"unit":{json.dumps(unit)},"command_applied":{_JSON_LITERAL[applied if applied is None else bool(applied)]},'
+        f'"unit":{_json_string(unit)},"command_applied":{_JSON_LITERAL[applied if applied is None else bool(applied)]},'
         f'"commands_effective":{_JSON_LITERAL[bool(effective)]}' + tail
     )
+
+
+_JSON_STRINGS: dict[str, str] = {}
+
+
+def _json_string(text: str) -> str:
+    """``json.dumps(text)``, remembered: the unit and the member's name are the same in every estimate."""
+    out = _JSON_STRINGS.get(text)
+    if out is None:
+        out = _JSON_STRINGS[text] = json.dumps(text)
+    return out
 
 
 def _json_float(value: float) -> str:

@@ -279,7 +279,7 @@ class Processed:
         self.f_mag = f_mag
         self.command_applied = command_applied  # did the previous command act (None: cannot tell)?
         # the absolute deflection u0 + u(k): what goes on the wire (observe-only: what the vehicle reported)
-        self.u_abs = u_abs if u_abs is not None else result.u.tolist()
+        self.u_abs = u_abs if u_abs is not None else list(result.u_values)
         self.compensation: list[float] | None = None  # --compensate: what is sent (G f_hat), added on board
         self.point: int | None = None  # an envelope model: the index of the point that stepped the sample
         self.inside: bool | None = None  # ... and whether its schedule values were inside the identified range
@@ -360,7 +360,8 @@ class VehicleTable:
             if vehicle is None:
                 return []
         asm = vehicle.assembler
-        k = asm.index_of(name, values)
+        at = asm.locate(name, values)
+        k = at[1] if at is not None else None
         instant = name == asm.signals.instant
         last_k = asm.last_k
         # where the vehicle's clock can be: only worth working out for a stamp beyond the usual slack
@@ -396,8 +397,8 @@ class VehicleTable:
             elif now - vehicle.future_since >= CLOCK_JUMP_S:
                 return self._restart(vehicle, name, values, route, now, "clock jumped", k)
         vehicle.last_seen = now
-        ready = asm.add(name, values, route, now, max_k, k)
-        return [(vehicle, s) for s in ready]
+        ready = asm.add(name, values, route, now, max_k, k, at[0] if at is not None else None)
+        return [(vehicle, s) for s in ready] if ready else []
 
     @staticmethod
     def _max_k(vehicle: Vehicle, now: float) -> int | None:
@@ -470,8 +471,9 @@ class VehicleTable:
             point, inside = self._schedule(vehicle, model.envelope, values, sample.k)
             model = model.envelope.points[point]
             sig = model.signals
-        for name in [n for n, v in values.items() if not math.isfinite(v)]:
-            del values[name]  # a non-finite recorded-only signal is not recorded
+        if not all(map(math.isfinite, values.values())):
+            for name in [n for n, v in values.items() if not math.isfinite(v)]:
+                del values[name]  # a non-finite recorded-only signal is not recorded
         # the estimator works in deviations from the signal map's operating point (zero when it has none), or from
         # an envelope's trim interpolated at the sample
         trim = vehicle.trim
@@ -506,7 +508,7 @@ class VehicleTable:
             elif est.plant.lags is None:  # past one sample the report is whichever command is in force
                 applied = self._judge_applied(vehicle, sample.k, u_report)
             result = est.step(vehicle.state, sample.k, y, u_prev=u_report, applied=applied, known=known)
-            vehicle.last_command = result.u.tolist()
+            vehicle.last_command = list(result.u_values)
             vehicle.last_command_k = sample.k
             u_abs = sig.absolute(vehicle.last_command, u0)
             lim = est.u_limit
@@ -524,7 +526,7 @@ class VehicleTable:
             vehicle.skipped += result.skipped
             self.counters.skipped += result.skipped
         t = sample.time_usec * 1e-6
-        f_mag = max(abs(float(f)) for f in result.f_hat)
+        f_mag = max(map(abs, result.f_hat_values))
         event = vehicle.alarm.update(f_mag) if inside is not False else None  # outside: the alarm does not judge
         tau_obs = vehicle.delay.update(t, wall)
         processed = Processed(vehicle, sample, result, t, y, tau_obs, event, f_mag, applied, u_abs)
@@ -603,10 +605,11 @@ class VehicleTable:
         """Did the last command (for k-1, or earlier when samples were lost since) act? The report at k says so."""
         if vehicle.last_command is None or vehicle.last_command_k is None or vehicle.last_command_k >= k:
             return None  # samples lost since the last command do not matter: no command was sent for them
-        applied = all(
-            abs(r - c) <= APPLIED_TOLERANCE * max(1.0, abs(c))
-            for r, c in zip(reported, vehicle.last_command, strict=True)
-        )
+        applied = True
+        for r, c in zip(reported, vehicle.last_command, strict=True):
+            if abs(r - c) > APPLIED_TOLERANCE * max(1.0, abs(c)):
+                applied = False
+                break
         vehicle.applied.append(applied)
         if not applied:
             vehicle.not_applied += 1
