@@ -74,10 +74,10 @@ class MessageLayout:
 
     def decode(self, payload: bytes) -> tuple:
         """All values of a payload (MAVLink 2 strips trailing zero bytes: they are put back)."""
-        size = self.unpacker.size
-        if len(payload) < size:
-            payload = bytes(payload) + bytes(size - len(payload))
-        return self.unpacker.unpack_from(payload)
+        unpacker = self.unpacker
+        if len(payload) < unpacker.size:
+            payload = bytes(payload).ljust(unpacker.size, b"\x00")
+        return unpacker.unpack_from(payload)
 
 
 def _build(cls) -> MessageLayout:

@@ -104,7 +104,7 @@ class FrameParser:
         if self._buf:
             data = self._buf + data
             self._buf = b""
-        elif self.signer is None and len(data) > _HEADER2 + 2 and data[0] == _STX2 and len(data) == 12 + data[1]:
+        elif self.signer is None and _HEADER2 + 2 < len(data) == _HEADER2 + 2 + data[1] and data[0] == _STX2:
             # the common datagram: one MAVLink 2 frame, exactly (routers send one message per datagram)
             msgid = data[7] | data[8] << 8 | data[9] << 16
             extra = self._crc_extra.get(msgid) or self._extra(msgid)

@@ -75,15 +75,9 @@ def estimate_payload(item: EstimateItem, unit: str, member: str | None = None) -
     return payload
 
 
-def _float_list(values) -> list[float]:
-    if type(values) is list:  # the loop's (floats, or ints from a limit written as an integer)
-        return [float(v) for v in values]
-    return values.tolist() if hasattr(values, "tolist") else [float(v) for v in values]
-
-
 def _json_numbers(values) -> str:
     """``[0.1, null]``: floats as ``json.dumps`` writes them (``repr``), a non-finite one as null."""
-    floats = _float_list(values)
+    floats = values.tolist() if hasattr(values, "tolist") else [float(v) for v in values]
     text = repr(floats)  # one C call for the common case; "nan", "inf" are the only reprs with an "n"
     if "n" not in text:
         return text
@@ -93,7 +87,7 @@ def _json_numbers(values) -> str:
 def _json_vectors(*vectors) -> list[str]:
     """``_json_numbers`` of each, from one ``repr`` of them all in the common case (every number finite): the
     reprs of floats hold no brackets, so the lists are split at ``], [``."""
-    text = repr([_float_list(v) for v in vectors])
+    text = repr([[float(v) for v in vector] for vector in vectors])
     if "n" in text:
         return [_json_numbers(v) for v in vectors]
     return ["[" + part + "]" for part in text[2:-2].split("], [")]
