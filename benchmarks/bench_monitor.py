@@ -256,7 +256,8 @@ def overload(plant: Path, gains: Path, workdir: Path, seconds: float, fleets: li
                 cpu0, t0 = cpu_seconds(proc.pid), time.monotonic()
                 timely: set[tuple[int, int]] = set()
                 rtts, sent, answered = drive(port, vehicles, seconds, "one message per datagram", timely)
-                cpu = (cpu_seconds(proc.pid) - cpu0) / (time.monotonic() - t0)
+                cpu_s = cpu_seconds(proc.pid) - cpu0
+                cpu = cpu_s / (time.monotonic() - t0)
             finally:
                 stop_server(proc)
             in_time = sum(1 for r in rtts if r <= H)
@@ -264,7 +265,8 @@ def overload(plant: Path, gains: Path, workdir: Path, seconds: float, fleets: li
                 f"  {vehicles:3d} x 50 Hz {kind:8s}: answered {answered / sent:6.1%} ({answered / seconds:6.0f}/s), "
                 f"within {H * 1e3:.0f} ms {in_time / seconds:6.0f}/s ({in_time / sent:6.1%}), "
                 f"round trip p50 {pct(rtts, 50) / 1e3:6.1f} ms p99 {pct(rtts, 99) / 1e3:6.1f} ms, "
-                f"CPU {cpu:4.0%} of a core, longest run without a timely answer {longest_gap(timely, vehicles):3d}"
+                f"CPU {cpu:4.0%} of a core ({cpu_s / max(answered, 1) * 1e6:3.0f} us per answer), "
+                f"longest run without a timely answer {longest_gap(timely, vehicles):3d}"
             )
         summary = [line for line in log_path.read_text().splitlines() if "stopped:" in line]
         if summary:

@@ -253,11 +253,16 @@ class UdpLink(Link):
         # the kernel stamps with the wall clock: this offset turns a stamp into perf_counter_ns
         offset = clock() - time.time_ns() if stamped else 0
         horizon = clock() - self.stale_ns if stamped and self.stale_ns and self.on_stale is not None else 0
+        seen = time.monotonic()  # when each peer was last heard, for the whole drain
         for _ in range(self.burst):
             try:
                 if stamped:
                     data, ancillary, _flags, addr = sock.recvmsg(65535, 64)
-                    t0 = _arrival(ancillary, offset) if ancillary else clock()
+                    if ancillary and len(ancillary[0][2]) >= _TIMESPEC.size:  # the one SCM_TIMESTAMPNS, inline
+                        sec, nsec = _TIMESPEC.unpack_from(ancillary[0][2])
+                        t0 = sec * 1_000_000_000 + nsec + offset
+                    else:
+                        t0 = _arrival(ancillary, offset) if ancillary else clock()
                 else:
                     data, addr = sock.recvfrom(65535)
                     t0 = clock()
@@ -269,7 +274,7 @@ class UdpLink(Link):
             if t0 < horizon:
                 stale.append(data)
                 continue
-            read = self._read(data, addr, t0)
+            read = self._read(data, addr, t0, seen)
             if read is not None:
                 reads.append(read)
         if stale and self.on_stale is not None:
@@ -283,7 +288,7 @@ class UdpLink(Link):
         if read is not None:
             _guarded(self.handler, [read])
 
-    def _read(self, data: bytes, addr, t0: int) -> Read | None:
+    def _read(self, data: bytes, addr, t0: int, seen: float | None = None) -> Read | None:
         frames = self.parser.feed(data)
         if not frames:  # junk costs no bookkeeping, and its source gets no heartbeat (no reflection)
             return None
@@ -293,7 +298,7 @@ class UdpLink(Link):
         elif len(peers) >= self.max_peers:
             self._v1_peers.discard(peers.popitem(last=False)[0])
             self.peers_evicted += 1
-        peers[addr] = time.monotonic()
+        peers[addr] = time.monotonic() if seen is None else seen
         if self.parser.version == 1:
             self._v1_peers.add(addr)
         elif self._v1_peers:

@@ -77,20 +77,14 @@ def estimate_payload(item: EstimateItem, unit: str, member: str | None = None) -
 
 def _json_numbers(values) -> str:
     """``[0.1, null]``: floats as ``json.dumps`` writes them (``repr``), a non-finite one as null."""
-    floats = values.tolist() if hasattr(values, "tolist") else [float(v) for v in values]
+    if type(values) is list:  # the loop's: floats (or ints from a limit written as an integer)
+        floats = [float(v) for v in values]
+    else:
+        floats = values.tolist() if hasattr(values, "tolist") else [float(v) for v in values]
     text = repr(floats)  # one C call for the common case; "nan", "inf" are the only reprs with an "n"
     if "n" not in text:
         return text
     return "[" + ", ".join(repr(v) if v - v == 0.0 else "null" for v in map(float, floats)) + "]"
-
-
-def _json_vectors(*vectors) -> list[str]:
-    """``_json_numbers`` of each, from one ``repr`` of them all in the common case (every number finite): the
-    reprs of floats hold no brackets, so the lists are split at ``], [``."""
-    text = repr([[float(v) for v in vector] for vector in vectors])
-    if "n" in text:
-        return [_json_numbers(v) for v in vectors]
-    return ["[" + part + "]" for part in text[2:-2].split("], [")]
 
 
 _JSON_LITERAL = {True: "true", False: "false", None: "null"}
@@ -107,10 +101,9 @@ def estimate_json(item: EstimateItem, unit: str, member: str | None = None) -> s
         else ""
     )
     tail += f',"member":{_json_string(member)}}}' if member is not None else "}"
-    f_json, x_json, r_json, u_json = _json_vectors(f_hat, x_hat, residual, u)
     return (
-        f'{{"sysid":{int(sysid)},"k":{int(k)},"t":{_json_float(t)},"f_hat":{f_json},'
-        f'"x_hat":{x_json},"residual":{r_json},"u":{u_json},'
+        f'{{"sysid":{int(sysid)},"k":{int(k)},"t":{_json_float(t)},"f_hat":{_json_numbers(f_hat)},'
+        f'"x_hat":{_json_numbers(x_hat)},"residual":{_json_numbers(residual)},"u":{_json_numbers(u)},'
         f'"tau":{"null" if tau is None else _json_float(tau)},"alarm":{_JSON_LITERAL[bool(alarm)]},'
         f'"unit":{_json_string(unit)},"command_applied":{_JSON_LITERAL[applied if applied is None else bool(applied)]},'
         f'"commands_effective":{_JSON_LITERAL[bool(effective)]}' + tail
