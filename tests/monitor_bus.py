@@ -120,6 +120,13 @@ def processed_count(log: str) -> int:
     return int(match.group(1))
 
 
+def shed_count(log: str) -> int:
+    """The summary's samples shed under overload (not answered: lost samples to the estimator)."""
+    match = re.search(r"[ ,]shed (\d+)", log)
+    assert match, log[-2000:]
+    return int(match.group(1))
+
+
 def settling_k(estimates: list[dict], truth: float, tol: float) -> int | None:
     """First k from which |f_hat - truth| <= tol holds for every later estimate."""
     ordered = sorted(estimates, key=lambda e: e["k"])

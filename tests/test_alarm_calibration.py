@@ -24,7 +24,7 @@ from monitor.wire.mavlink import mavlink, new_codec
 
 PRESET = Path(__file__).resolve().parents[1] / "monitor" / "presets" / "paper-continuous.toml"
 SIGMA, TIME_CONSTANT = 0.02, 3.0  # the [disturbance] the plant file states (deg, s)
-HOURS = 4.0
+HOURS = 2.0
 
 
 def _plant_file(tmp: Path) -> Path:
@@ -121,4 +121,4 @@ def test_the_cli_takes_it_with_auto_and_turbulence_only_and_says_what_it_did(fli
     with caplog.at_level(logging.INFO, logger="monitor.alarm"):
         code = main([*base, "--alarm-threshold", "auto", "--turbulence", "light", "--calibration-log", log])
     assert code == 0
-    assert any("calibrated on 240.0 min of flight" in r.getMessage() for r in caplog.records)
+    assert any("calibrated on 120.0 min of flight" in r.getMessage() for r in caplog.records)

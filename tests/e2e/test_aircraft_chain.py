@@ -20,7 +20,7 @@ import numpy as np
 
 from tests.daemons import Daemon, free_tcp_port, wait_for
 from tests.e2e.mavproxy_router import tlog_counts
-from tests.monitor_bus import processed_count, wait_ready
+from tests.monitor_bus import processed_count, shed_count, wait_ready
 from tests.readme_blocks import Session, group
 
 RATE = 20  # Hz: h = 0.05 s
@@ -153,7 +153,10 @@ def test_excite_identify_design_and_close_the_loop_on_jsbsim(tmp_path: Path) -> 
             monitor.signal()  # SIGTERM: the summary line and a complete recording
             assert monitor.wait(30) == 0, monitor.log()[-3000:]
         s.stop()
-    assert processed_count(monitor.log()) >= FLIGHT_STEPS - 5, monitor.log()[-2000:]
+    # every sample answered or, on a machine too busy to keep up at 3x through MAVProxy, shed: a lost sample the
+    # estimator predicts across (at most a tenth of the flight; one CI run under load shed 20 of 720)
+    processed, shed = processed_count(monitor.log()), shed_count(monitor.log())
+    assert processed + shed >= FLIGHT_STEPS - 5 and shed <= FLIGHT_STEPS // 10, monitor.log()[-2000:]
     truth_f = {p["k"]: float(p["f"][0]) for p in map(json.loads, truth.read_text().splitlines()) if p["f"]}
     live = read_recording(rrd).vehicles[2].samples
     _assert_tracks_the_bias(_f_hat_by_k(live), truth_f, "closed loop, live")
