@@ -21,7 +21,7 @@ import signal
 from pathlib import Path
 
 from tests.daemons import Daemon, free_udp_port, wait_for
-from tests.monitor_bus import monitor_daemon, processed_count, sim_daemon, wait_ready, zenoh_bus
+from tests.monitor_bus import monitor_daemon, processed_count, shed_count, sim_daemon, wait_ready, zenoh_bus
 
 STEPS = 30
 SPEEDUP = 20
@@ -104,18 +104,22 @@ def test_signed_link_closes_the_loop_and_a_wrong_key_processes_nothing(tmp_path:
             ):
                 assert sim_good.wait(30) == 0, sim_good.log()
                 assert sim_bad.wait(30) == 0, sim_bad.log()
-            wait_for(lambda: len([e for e in estimates if e["sysid"] == 1]) >= STEPS, 30, what="signed estimates")
+            # every sample answered, or on a machine too busy to keep up at 20x, shed (at most two; counted)
+            wait_for(lambda: len([e for e in estimates if e["sysid"] == 1]) >= STEPS - 2, 30, what="signed estimates")
             good_log, bad_log = _stop(good), _stop(bad)
+            processed = processed_count(good_log)
+            wait_for(lambda: len([e for e in estimates if e["sysid"] == 1]) >= processed, 10, what="every estimate")
 
     # same key: every sample processed and answered, the vehicle applied the (signed) commands
-    assert processed_count(good_log) == STEPS and _summary_count(good_log, "bad signature") == 0
-    assert _summary_count(good_log, "commands") == STEPS
+    shed = shed_count(good_log)
+    assert processed + shed == STEPS and shed <= 2 and _summary_count(good_log, "bad signature") == 0, good_log
+    assert _summary_count(good_log, "commands") == processed
     s = _sim_summary(good_json)
     assert s["samples"]["sent"] == STEPS
-    assert s["commands"]["received"] == STEPS and s["commands"]["applied"] >= STEPS - 2, s
+    assert s["commands"]["received"] == processed and s["commands"]["applied"] >= processed - 2, s
     assert s["packets"].get("rejected_signature", 0) == 0, s
     per = _by_sysid(estimates)
-    assert sorted(per[1]) == list(range(STEPS))
+    assert len(per[1]) == processed and set(per[1]) <= set(range(STEPS))
 
     # another key: nothing processed, every sample a bad signature, no command sent, none applied
     assert processed_count(bad_log) == 0 and _summary_count(bad_log, "commands") == 0

@@ -161,8 +161,10 @@ def test_a_monitor_running_a_third_of_the_time_stays_current(tmp_path: Path) -> 
         flying.set()
         pilot = threading.Thread(target=fly, daemon=True)
         pilot.start()
+        stops: list[float] = []  # monotonic instants the monitor was stopped
         try:
             while flying.is_set():  # the outside script: stopped two thirds of the time
+                stops.append(time.monotonic())
                 os.kill(monitor.proc.pid, signal.SIGSTOP)
                 time.sleep(0.2)
                 os.kill(monitor.proc.pid, signal.SIGCONT)
@@ -185,7 +187,14 @@ def test_a_monitor_running_a_third_of_the_time_stays_current(tmp_path: Path) -> 
     assert samples // 4 <= shed <= samples - processed, summary
     assert f"skipped {samples - 1 - answered[0] - (len(answered) - 1)}," in summary, summary
     # every answer within one sample period of its sample; a stop that lands between the decision to answer and
-    # the send delays that one answer by the stop, which no monitor can prevent: one such answer is tolerated
+    # the send delays that answer by the stop, which no monitor can prevent (a slow machine spends longer on each
+    # answer, so more stops land there): such an answer is excused only if a stop began while its sample was in the
+    # monitor and it came within the stop's 0.2 s plus one period
     late = {k: rtt for k, rtt in vehicle.round_trips.items() if rtt > h}
-    assert len(late) <= 1, (late, vehicle.round_trips)
+    caught = {
+        k
+        for k, rtt in late.items()
+        if rtt <= 0.2 + h and any(vehicle.sent_at[k] <= t <= vehicle.sent_at[k] + h for t in stops)
+    }
+    assert set(late) == caught and len(caught) <= len(stops) // 3, (late, stops, vehicle.round_trips)
     assert log.count("overloaded:") >= 1, log[-3000:]
