@@ -345,7 +345,7 @@ def register(subparsers) -> None:
         "telemetry (a router with one output per member) and share one Zenoh network. Each vehicle is answered "
         "(command, ground-station feedback, Zenoh estimate and alarm) by one member, chosen by rendezvous hashing "
         "of its system id over the live members; the others step its estimator on the same samples and stay "
-        "silent, so that one takes over, f_hat going on without a reset, within 0.35 s of a member's last beat "
+        "silent, so that one takes over, f_hat going on without a reset, within 0.5 s of a member's last beat "
         "when it dies or hangs (liveliness <prefix>/monitor/group/NAME/<name>, beats every 0.1 s on "
         ".../<name>/beat). Members need distinct --name values. Estimates then name the member that answered "
         '("member"), and the recording marks each sample group/served. See the fleets guide',

@@ -50,7 +50,7 @@ from typing import Any
 __all__ = ["BEAT_S", "SILENCE_S", "SETTLE_S", "GRACE_S", "state_digest", "weight", "owner", "Peer", "GroupView"]
 
 BEAT_S = 0.1  # a member's beat period
-SILENCE_S = 0.35  # a member silent this long is dead to the assignment (3.5 beats: one lost or late beat is not)
+SILENCE_S = 0.5  # a member silent this long is dead to the assignment (5 beats: a busy machine stalls a loop 0.35 s)
 SETTLE_S = 0.15  # after a start or a stall: listen this long (every live peer beats in it) before judging alone
 GRACE_S = 0.3  # a vehicle this new here: a live peer that does not list it yet is presumed to start it too
 HISTORY = 64  # steps remembered per vehicle to compare with the owner's (1.3 s at 50 Hz; beats come every 0.1 s)
