@@ -7,8 +7,10 @@ from JSBSim's bundled set unless the aircraft has its own), or the aircraft's ow
 
 Trim. Level flight (flight-path angle 0) at ``--airspeed`` knots calibrated and ``--altitude`` feet above sea
 level, engines running, JSBSim's full trim (``simulation/do_simple_trim = 1``: throttle, elevator via the pitch
-trim, aileron, rudder, attitude). An aircraft that does not trim there is a ``UserError`` quoting JSBSim's
-``TrimFailureError`` and the reason JSBSim printed (e.g. "udot doesn't appear to be trimmable").
+trim, aileron, rudder, attitude). Where that fails, the aircraft is trimmed by flying it (``_fly_to_trim``: the
+on-board autopilot holds the airspeed and altitude until steady); an aircraft that neither trims nor settles is
+a ``UserError`` quoting JSBSim's ``TrimFailureError``, the reason JSBSim printed (e.g. "udot doesn't appear to be
+trimmable") and what the autopilot found (a stall, a throttle on its stop).
 
 The elevator. The servo (``sim_vehicle.dynamics.Airframe``) works in absolute degrees of surface deflection,
 trim included, so the surface is driven by deflection, not by stick. JSBSim's aerodynamics read
@@ -89,6 +91,15 @@ MILSPEC = 3  # atmosphere/turb-type: ttMilspec (Dryden spectrum, MIL-F-8785C)
 _PROBE = np.linspace(-1.0, 1.0, 81)  # commands probed for the elevator's scaling (0 and the ends included)
 _LCG_MODULUS = 2**31 - 1
 DEFAULT_STALL_ALPHA_DEG = 15.0  # when the aircraft's files say nothing (a light aircraft's stall is 14-18 deg)
+# trimmed by flying (``_fly_to_trim``), when JSBSim's trim fails: steady this long within these, in at most MAX_S
+FLOWN_TRIM_MAX_S = 150.0
+FLOWN_TRIM_STOP_S = 60.0  # the autopilot's throttle-on-a-stop watch, this long after it fired: the engine cannot
+FLOWN_TRIM_STEADY_S = 5.0
+FLOWN_TRIM_CLIMB_FPM = 20.0
+FLOWN_TRIM_ALTITUDE_FT = 20.0
+FLOWN_TRIM_RATE_DEG_S = 0.1
+FLOWN_TRIM_BANK_DEG = 0.5
+FLOWN_TRIM_THROTTLE = 0.6  # where the throttle starts; its integral finds the rest
 
 
 @dataclass(frozen=True)
@@ -273,8 +284,9 @@ def _lift_peak_deg(xml: Path) -> float | None:
     return None if best is None else best[1]
 
 
-def _load_and_trim(jsbsim, spec: AircraftSpec):
-    """A trimmed FDM instance of ``spec`` (a ``UserError`` naming the reason when it cannot be had)."""
+def _load(jsbsim, spec: AircraftSpec):
+    """An FDM instance of ``spec`` at its initial conditions, engines running, not trimmed (a ``UserError`` naming
+    the reason when JSBSim cannot load it)."""
     bundled = Path(jsbsim.get_default_root_dir())
     root, aircraft_path, add_name = _locate(spec.name, spec.aircraft_dir, bundled)
     what = f"--aircraft {spec.name}"
@@ -301,7 +313,15 @@ def _load_and_trim(jsbsim, spec: AircraftSpec):
     fdm["ic/h-sl-ft"] = spec.altitude_ft
     fdm["ic/vc-kts"] = spec.airspeed_kt
     fdm["ic/gamma-deg"] = 0.0
-    where = f"{spec.airspeed_kt:g} kt, {spec.altitude_ft:g} ft"
+    return fdm
+
+
+def _where(spec: AircraftSpec) -> str:
+    return f"{spec.airspeed_kt:g} kt, {spec.altitude_ft:g} ft"
+
+
+def _jsbsim_trim(jsbsim, fdm, spec: AircraftSpec) -> str:  # noqa: ANN001 - the lazily imported module, an FGFDMExec
+    """Run the initial conditions and JSBSim's full trim on ``fdm``; "" when it trimmed, else why it did not."""
     with _jsbsim_messages(jsbsim) as printed:
         try:
             fdm.run_ic()
@@ -313,21 +333,118 @@ def _load_and_trim(jsbsim, spec: AircraftSpec):
             failure = f"{type(exc).__name__}: {exc}"
         else:
             failure = ""
-    log.debug("JSBSim trimming %s at %s: %s", spec.name, where, printed[0].strip())
+    log.debug("JSBSim trimming %s at %s: %s", spec.name, _where(spec), printed[0].strip())
     if failure:
         detail = _reason(printed[0])
-        raise UserError(f"{what} does not trim at {where}: {failure}" + (f" ({detail})" if detail else ""))
+        return failure + (f" ({detail})" if detail else "")
     alpha, airspeed = fdm["aero/alpha-deg"], fdm["velocities/vc-kts"]
-    if not (math.isfinite(alpha) and abs(airspeed - spec.airspeed_kt) < 0.01 * spec.airspeed_kt + 0.5):
-        raise UserError(f"{what} does not trim at {where}: JSBSim reports alpha {alpha:g} deg at {airspeed:g} kt")
+    if not (math.isfinite(alpha) and abs(airspeed - spec.airspeed_kt) < _airspeed_tolerance(spec)):
+        return f"JSBSim reports alpha {alpha:g} deg at {airspeed:g} kt"
+    return ""
+
+
+def _airspeed_tolerance(spec: AircraftSpec) -> float:
+    return 0.01 * spec.airspeed_kt + 0.5
+
+
+def _load_and_trim(jsbsim, spec: AircraftSpec):
+    """A trimmed FDM instance of ``spec`` by JSBSim's trim (a ``UserError`` naming the reason when it cannot be
+    had); the flight model falls back on ``_fly_to_trim`` itself, as that needs the elevator's map."""
+    fdm = _load(jsbsim, spec)
+    failure = _jsbsim_trim(jsbsim, fdm, spec)
+    if failure:
+        raise UserError(f"--aircraft {spec.name} does not trim at {_where(spec)}: {failure}")
     return fdm
 
 
-def _elevator_map(jsbsim, spec: AircraftSpec) -> tuple[np.ndarray, np.ndarray]:
-    """Deflection (deg) per ``fcs/elevator-cmd-norm`` with the pitch trim at 0, from a throw-away instance."""
-    probe = _load_and_trim(jsbsim, spec)
+def _fly_to_trim(  # noqa: ANN001 - an FGFDMExec
+    fdm, spec: AircraftSpec, commands: np.ndarray, deflections: np.ndarray, stall_alpha_deg: float, failure: str
+) -> None:
+    """Trim by flying: the on-board autopilot holds ``spec``'s airspeed and altitude, wings level, until the
+    aircraft is steady (``FLOWN_TRIM_STEADY_S`` within the tolerances below), at most ``FLOWN_TRIM_MAX_S``.
+
+    Why: JSBSim's trim fails on aircraft that fly perfectly well, piston-engined ones most (pa28, c310, p51d, pc7:
+    "udot doesn't appear to be trimmable"; its steady-state engine loop freezes the inputs the flight-control
+    system computes, JSBSim issue 1440). What is left is the steady state an autopilot finds, with its residue:
+    the phugoid's last swing and the airspeed within the tolerance JSBSim's own trim is held to. A ``UserError``
+    when the autopilot cannot settle it either: a stall, a throttle on its stop for ``FLOWN_TRIM_STOP_S`` after
+    the autopilot's own watch (5 s) fired (a turbine spools up for tens of seconds from the initial conditions),
+    or no steady state in time."""
+    from sim_vehicle.autopilot import Autopilot, Targets, Trim
+
+    where = f"--aircraft {spec.name} does not trim at {_where(spec)}"
+    fdm.run_ic()
+    engines = max(1, int(fdm.get_propulsion().get_num_engines()))
+    for i in range(engines):  # mixture rich, a constant-speed propeller at its highest rpm: full power available
+        fdm[f"fcs/mixture-cmd-norm[{i}]"] = 1.0
+        fdm[f"fcs/advance-cmd-norm[{i}]"] = 1.0
+    fdm["propulsion/magneto_cmd"] = 3  # both magnetos (p51d: its engine does not run without them)
+    fdm["propulsion/starter_cmd"] = 1
+    fdm["propulsion/set-running"] = -1
+    fdm["fcs/pitch-trim-cmd-norm"] = 0.0
+    increasing = np.argsort(deflections, kind="stable")
+    deg, cmd = deflections[increasing], commands[increasing]
+    trim = Trim(
+        elevator_deg=float(np.interp(0.0, commands, deflections)),
+        aileron=0.0,
+        rudder=0.0,
+        throttle=FLOWN_TRIM_THROTTLE,
+        theta_deg=fdm["attitude/theta-deg"],
+        airspeed_kt=spec.airspeed_kt,
+        altitude_ft=spec.altitude_ft,
+        qbar_psf=fdm["aero/qbar-psf"],
+    )
+    throttles = tuple("fcs/throttle-cmd-norm" + (f"[{i}]" if i else "") for i in range(engines))
+    dt = float(fdm.get_delta_t())
+    pilot = Autopilot(trim, (float(deg[0]), float(deg[-1])), dt, stall_alpha_deg, throttles=throttles)
+    targets = Targets(airspeed_kt=spec.airspeed_kt, altitude_ft=spec.altitude_ft, bank_deg=0.0)
+    tolerance = _airspeed_tolerance(spec)
+    steady, troubled = 0.0, 0.0
+    for _ in range(int(FLOWN_TRIM_MAX_S / dt)):
+        fdm["fcs/elevator-cmd-norm"] = float(np.interp(pilot.step(fdm, targets), deg, cmd))
+        fdm.run()
+        trouble = pilot.trouble
+        troubled = troubled + dt if trouble is not None else 0.0
+        # a stall is final; a throttle on its stop only once it has stayed there (a turbine spools up for tens of
+        # seconds from the initial conditions: pc7)
+        if trouble is not None and (trouble[0] == "stalls" or troubled >= FLOWN_TRIM_STOP_S):
+            raise UserError(
+                f"{where}: JSBSim's trim failed ({failure}); flown by the autopilot it {trouble[0]}: {trouble[1]}; "
+                f"{fdm['velocities/vc-kts']:.1f} kt after {fdm['simulation/sim-time-sec']:.0f} s"
+            )
+        settled = (
+            abs(fdm["velocities/vc-kts"] - spec.airspeed_kt) < tolerance
+            and abs(fdm["velocities/h-dot-fps"]) * 60.0 < FLOWN_TRIM_CLIMB_FPM
+            and abs(fdm["position/h-sl-ft"] - spec.altitude_ft) < FLOWN_TRIM_ALTITUDE_FT
+            and abs(math.degrees(fdm["velocities/q-rad_sec"])) < FLOWN_TRIM_RATE_DEG_S
+            and abs(fdm["attitude/phi-deg"]) < FLOWN_TRIM_BANK_DEG
+        )
+        steady = steady + dt if settled else 0.0
+        if steady >= FLOWN_TRIM_STEADY_S:
+            log.info(
+                "%s: JSBSim's trim failed (%s); trimmed by flying it (%.0f s of simulated flight, throttle %.2f)",
+                spec.name,
+                failure,
+                fdm["simulation/sim-time-sec"],
+                fdm["fcs/throttle-cmd-norm"],
+            )
+            return
+    raise UserError(
+        f"{where}: JSBSim's trim failed ({failure}) and flown by the autopilot it was not steady after "
+        f"{FLOWN_TRIM_MAX_S:g} s (airspeed {fdm['velocities/vc-kts']:.1f} kt, "
+        f"climb {fdm['velocities/h-dot-fps'] * 60.0:.0f} ft/min, throttle {fdm['fcs/throttle-cmd-norm']:.2f})"
+    )
+
+
+def _elevator_map(jsbsim, spec: AircraftSpec, trimmed: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Deflection (deg) per ``fcs/elevator-cmd-norm`` with the pitch trim at 0, from a throw-away instance
+    (trimmed as the flying one is by JSBSim's trim; ``trimmed=False``: at its initial conditions, for an aircraft
+    JSBSim's trim fails on: the map is the flight-control system's, integration suspended)."""
+    probe = _load_and_trim(jsbsim, spec) if trimmed else _load(jsbsim, spec)
     try:
         with _jsbsim_messages(jsbsim):
+            if not trimmed:
+                probe.run_ic()
             probe.suspend_integration()
             probe["fcs/pitch-trim-cmd-norm"] = 0.0
             deg = []
@@ -356,9 +473,15 @@ class JSBSimFlightModel:
         self.h = float(spec.h)
         self.dt = step_size(self.h, spec.dt)
         spec = AircraftSpec(**{**spec.__dict__, "dt": self.dt})
-        self.fdm = _load_and_trim(jsbsim, spec)
+        self.fdm = _load(jsbsim, spec)
         self.version = jsbsim.__version__
-        commands, deflections = _elevator_map(jsbsim, spec)
+        failure = _jsbsim_trim(jsbsim, self.fdm, spec)
+        commands, deflections = _elevator_map(jsbsim, spec, trimmed=not failure)
+        self.trimmed_by = "JSBSim's trim"
+        if failure:
+            xml = _aircraft_xml(spec, Path(jsbsim.get_default_root_dir()))
+            _fly_to_trim(self.fdm, spec, commands, deflections, stall_alpha(self.fdm, xml)[0], failure)
+            self.trimmed_by = "flying it on the autopilot"
         self.trim_deflection = float(self.fdm["fcs/elevator-pos-deg"])
         total = float(self.fdm["fcs/elevator-cmd-norm"] + self.fdm["fcs/pitch-trim-cmd-norm"])
         self._deg, self._cmd = self._inverse(commands, deflections, total)

@@ -78,6 +78,26 @@ def test_c172p_trims_at_100_kt_3000_ft_and_stays_there_open_loop_for_10_s():
     assert model.truth_extras()["surface"] == pytest.approx(model.trim_deflection, abs=1e-9)
 
 
+def test_an_aircraft_jsbsim_s_trim_fails_on_is_trimmed_by_flying_it_and_stays_there_open_loop():
+    # pa28 at 100 kt: JSBSim's trim fails ("udot doesn't appear to be trimmable": its engine loop without the
+    # magnetos), the autopilot flies it steady at 100 kt and 3000 ft and hands it over, the elevator held there
+    model = JSBSimFlightModel(AircraftSpec("pa28", airspeed_kt=100.0))
+    assert model.trimmed_by == "flying it on the autopilot"
+    trim = model.trim
+    assert trim["airspeed_kt"] == pytest.approx(100.0, abs=1.5) and trim["altitude_ft"] == pytest.approx(3000, abs=20)
+    assert 0.0 < trim["throttle"] < 1.0 and model.travel[0] < model.trim_deflection < model.travel[1]
+    start = model.state()
+    xs = []
+    for _ in range(200):  # 10 s, the elevator held where the autopilot left it
+        model.step(0.05, model.trim_deflection, 0.0, [0.0], [])
+        xs.append(model.state())
+    xs = np.array(xs)
+    # near an equilibrium, not at one (the autopilot's residue: steady within 20 ft/min and 0.1 deg/s)
+    assert np.abs(xs[:, 0] - start[0]).max() < 0.3 and np.abs(xs[:, 1]).max() < 0.3  # measured 6e-4 deg, 0.03 deg/s
+    assert np.abs(xs[:, 3] - start[3]).max() < 0.5  # m/s
+    model.close()
+
+
 @pytest.mark.parametrize("name, airspeed", [("c172p", 100.0), ("737", 250.0), ("J3Cub", 60.0)])
 def test_an_absolute_deflection_reaches_the_surface_and_writing_the_surface_itself_does_not(name, airspeed):
     """Why the command goes through fcs/elevator-cmd-norm: the aircraft's FCS rewrites fcs/elevator-pos-rad
@@ -211,8 +231,9 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
     [
         (
             ["--aircraft", "c172p", "--airspeed", "300"],
-            "--aircraft c172p does not trim at 300 kt, 3000 ft: "
-            "Trim Failed (Sorry, udot doesn't appear to be trimmable)",
+            "--aircraft c172p does not trim at 300 kt, 3000 ft: JSBSim's trim failed "
+            "(Trim Failed (Sorry, udot doesn't appear to be trimmable)); flown by the autopilot it cannot hold 300 kt: "
+            "throttle at full",
         ),
         (["--aircraft", "no-such-plane"], "--aircraft no-such-plane: JSBSim has no such aircraft"),
         (["--aircraft", "c172p", "--wind", "paper"], "--wind does not go with --aircraft"),
