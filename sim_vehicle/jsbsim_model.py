@@ -316,6 +316,20 @@ def _load(jsbsim, spec: AircraftSpec):
     return fdm
 
 
+def _engines_on(fdm) -> int:  # noqa: ANN001 - an FGFDMExec
+    """Every engine running as a pilot runs it in flight: mixture rich, both magnetos, a constant-speed propeller
+    at its highest rpm. Why: JSBSim's ``set-running`` alone leaves the magnetos off, and a piston engine then gives
+    less power (pa28: 98 kt at full throttle, where with them it holds 100 kt at 0.84). No change on c172p,
+    t6texan2 or J3Cub (their trims are the same to the last digit). Returns the number of engines."""
+    engines = max(1, int(fdm.get_propulsion().get_num_engines()))
+    for i in range(engines):
+        fdm[f"fcs/mixture-cmd-norm[{i}]"] = 1.0
+        fdm[f"fcs/advance-cmd-norm[{i}]"] = 1.0
+    fdm["propulsion/magneto_cmd"] = 3
+    fdm["propulsion/set-running"] = -1
+    return engines
+
+
 def _where(spec: AircraftSpec) -> str:
     return f"{spec.airspeed_kt:g} kt, {spec.altitude_ft:g} ft"
 
@@ -325,7 +339,7 @@ def _jsbsim_trim(jsbsim, fdm, spec: AircraftSpec) -> str:  # noqa: ANN001 - the 
     with _jsbsim_messages(jsbsim) as printed:
         try:
             fdm.run_ic()
-            fdm["propulsion/set-running"] = -1  # every engine running
+            _engines_on(fdm)
             fdm["simulation/do_simple_trim"] = 1  # full trim
         except jsbsim.TrimFailureError as exc:
             failure = f"{exc}"
@@ -363,24 +377,18 @@ def _fly_to_trim(  # noqa: ANN001 - an FGFDMExec
     """Trim by flying: the on-board autopilot holds ``spec``'s airspeed and altitude, wings level, until the
     aircraft is steady (``FLOWN_TRIM_STEADY_S`` within the tolerances below), at most ``FLOWN_TRIM_MAX_S``.
 
-    Why: JSBSim's trim fails on aircraft that fly perfectly well, piston-engined ones most (pa28, c310, p51d, pc7:
-    "udot doesn't appear to be trimmable"; its steady-state engine loop freezes the inputs the flight-control
-    system computes, JSBSim issue 1440). What is left is the steady state an autopilot finds, with its residue:
-    the phugoid's last swing and the airspeed within the tolerance JSBSim's own trim is held to. A ``UserError``
-    when the autopilot cannot settle it either: a stall, a throttle on its stop for ``FLOWN_TRIM_STOP_S`` after
-    the autopilot's own watch (5 s) fired (a turbine spools up for tens of seconds from the initial conditions),
-    or no steady state in time."""
+    Why: JSBSim's trim fails on aircraft that fly perfectly well, piston-engined ones with their magnetos on most
+    (pa28, c310: "udot doesn't appear to be trimmable"; its steady-state engine loop freezes the inputs the
+    flight-control system computes, JSBSim issue 1440). What is left is the steady state an autopilot finds, with
+    its residue: the phugoid's last swing and the airspeed within the tolerance JSBSim's own trim is held to. A
+    ``UserError`` when the autopilot cannot settle it either: a stall, a throttle on its stop for
+    ``FLOWN_TRIM_STOP_S`` after the autopilot's own watch (5 s) fired (a turbine spools up for tens of seconds
+    from the initial conditions), or no steady state in time."""
     from sim_vehicle.autopilot import Autopilot, Targets, Trim
 
     where = f"--aircraft {spec.name} does not trim at {_where(spec)}"
     fdm.run_ic()
-    engines = max(1, int(fdm.get_propulsion().get_num_engines()))
-    for i in range(engines):  # mixture rich, a constant-speed propeller at its highest rpm: full power available
-        fdm[f"fcs/mixture-cmd-norm[{i}]"] = 1.0
-        fdm[f"fcs/advance-cmd-norm[{i}]"] = 1.0
-    fdm["propulsion/magneto_cmd"] = 3  # both magnetos (p51d: its engine does not run without them)
-    fdm["propulsion/starter_cmd"] = 1
-    fdm["propulsion/set-running"] = -1
+    engines = _engines_on(fdm)
     fdm["fcs/pitch-trim-cmd-norm"] = 0.0
     increasing = np.argsort(deflections, kind="stable")
     deg, cmd = deflections[increasing], commands[increasing]
@@ -478,7 +486,8 @@ class JSBSimFlightModel:
         failure = _jsbsim_trim(jsbsim, self.fdm, spec)
         commands, deflections = _elevator_map(jsbsim, spec, trimmed=not failure)
         self.trimmed_by = "JSBSim's trim"
-        if failure:
+        if failure:  # flown from a fresh instance: a failed trim leaves its engines in no state to fly
+            self.fdm = _load(jsbsim, spec)
             xml = _aircraft_xml(spec, Path(jsbsim.get_default_root_dir()))
             _fly_to_trim(self.fdm, spec, commands, deflections, stall_alpha(self.fdm, xml)[0], failure)
             self.trimmed_by = "flying it on the autopilot"
