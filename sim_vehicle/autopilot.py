@@ -44,7 +44,9 @@ The autopilot also watches for what the aircraft cannot do: ``Autopilot.trouble`
 aircraft's stall alpha for ``STALL_PERSISTENCE_S``), or a throttle held at a stop for ``THROTTLE_STOP_S`` (5 s)
 while the airspeed error exceeds ``THROTTLE_STOP_ERROR_KT`` (5 kt) once the reference has stopped moving (a ramp's
 lag is not a failure); that error is averaged over ``WATCH_AVERAGE_S`` (20 s), as JSBSim's turbulence moves the
-airspeed by 5-10 kt for seconds at a time. The flight model turns it into a one-line error.
+airspeed by 5-10 kt for seconds at a time. An airspeed that still closes on the reference at ``PROGRESS_KT_S``
+(0.2 kt/s, low-passed over 5 s) is no failure either: a low-powered aircraft (pa28) bleeds 30 kt in a 60-deg turn
+and needs half a minute at full throttle to regain it. The flight model turns it into a one-line error.
 
 Pure Python: it reads and writes JSBSim properties through any ``Properties`` object (an ``FGFDMExec`` is one),
 so it never imports JSBSim.
@@ -69,6 +71,7 @@ __all__ = [
     "HEADING_BANK_LIMIT_DEG",
     "THROTTLE_STOP_S",
     "THROTTLE_STOP_ERROR_KT",
+    "PROGRESS_KT_S",
     "STALL_PERSISTENCE_S",
 ]
 
@@ -82,6 +85,8 @@ HEADING_BANK_LIMIT_DEG = 30.0  # heading hold banks at most this much
 THROTTLE_STOP_S = 5.0  # a throttle held at a stop this long ...
 THROTTLE_STOP_ERROR_KT = 5.0  # ... while the airspeed error exceeds this: the aircraft cannot fly the segment
 WATCH_AVERAGE_S = 20.0  # the watch averages the airspeed error over this long (gusts last seconds)
+PROGRESS_KT_S = 0.2  # ... unless the airspeed still closes on the reference this fast (accelerating back after a turn)
+PROGRESS_FILTER_S = 5.0  # that rate, low-passed over this long
 STALL_PERSISTENCE_S = 0.5  # alpha above the stall alpha this long is a stall (not a gust's spike)
 PITCH_LIMITS_DEG = (-15.0, 20.0)  # the pitch-attitude command stays within these
 
@@ -189,6 +194,8 @@ class Autopilot:
         self._r_low = 0.0  # the yaw rate's low-passed part (what the washout removes)
         self._airspeed = trim.airspeed_kt  # the airspeed, low-passed (gusts are not the throttle's business)
         self._watched_error = 0.0  # the airspeed error, low-passed over THROTTLE_STOP_S (the watch's)
+        self._progress = 0.0  # how fast the airspeed closes on its reference (kt/s), low-passed
+        self._last_airspeed: float | None = None
         self._throttle_i = 0.0
         self._altitude_i = 0.0
         self._pitch_i = 0.0
@@ -329,7 +336,16 @@ class Autopilot:
         # the error is averaged over the watch's own window, so that a gust is not either
         self._watched_error += (self.airspeed_ref - airspeed - self._watched_error) * self.dt / WATCH_AVERAGE_S
         speed_error = self._watched_error
-        off = stop is not None and not ramping and abs(speed_error) > THROTTLE_STOP_ERROR_KT
+        if self._last_airspeed is not None:
+            closing = (airspeed - self._last_airspeed) / self.dt * (1.0 if self.airspeed_ref > airspeed else -1.0)
+            self._progress += (closing - self._progress) * self.dt / PROGRESS_FILTER_S
+        self._last_airspeed = airspeed
+        off = (
+            stop is not None
+            and not ramping
+            and abs(speed_error) > THROTTLE_STOP_ERROR_KT
+            and self._progress < PROGRESS_KT_S
+        )
         self._stop_s = self._stop_s + self.dt if off else 0.0
         if self._stop_s >= THROTTLE_STOP_S - 1e-9:
             self.trouble = (

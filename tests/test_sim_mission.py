@@ -379,3 +379,23 @@ def test_an_identification_leg_holds_stick_and_throttle_and_reports_each_prbs_sw
     held = leg[0]["throttle"] - timeline.throttle_at(2.0) / 100.0
     assert {round(t["throttle"] - held, 9) for t in leg[:-20]} <= {0.05, -0.05}
     assert len({t["throttle"] for t in leg}) >= 2
+
+
+def test_a_throttle_at_full_while_the_airspeed_still_climbs_back_is_no_failure_and_a_stuck_one_is() -> None:
+    """The watch, fed directly: 25 kt below the reference at full throttle, regaining 0.5 kt/s (a pa28 after a
+    60-deg turn) for 30 s is no trouble; the same error with the airspeed stuck is, after the 5-s stop."""
+    from sim_vehicle.autopilot import Autopilot, Targets, Trim
+
+    trim = Trim(0.0, 0.0, 0.0, 1.0, 0.0, 90.0, 3000.0, 20.0)
+    dt = 1.0 / 120.0
+    targets = Targets(airspeed_kt=90.0, altitude_ft=3000.0, bank_deg=0.0)
+    for rate, troubled in ((0.5, False), (0.0, True)):
+        pilot = Autopilot(trim, (-20.0, 20.0), dt, 15.0)
+        pilot.throttle = 1.0
+        airspeed = 65.0
+        for _ in range(int(30.0 / dt)):
+            pilot._watch(2.0, airspeed, targets, ramping=False)
+            airspeed += rate * dt
+        assert (pilot.trouble is not None) == troubled, pilot.trouble
+        if troubled:
+            assert pilot.trouble is not None and pilot.trouble[0] == "cannot hold 90 kt"
